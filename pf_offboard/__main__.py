@@ -1,0 +1,5 @@
+import sys
+
+from pf_offboard.cli import main
+
+sys.exit(main())
