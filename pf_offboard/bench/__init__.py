@@ -1,0 +1,56 @@
+"""``pf-offboard bench``: speed figures (printed, or ``--json``), never timing assertions in tests.
+
+Sections:
+- ``core``: cost of ``PathFollower.update()`` on the paper path (median, p99 µs).
+- ``sim``: in-process simulation speed of the sitl_mock dynamics (× real time at 1 kHz physics).
+- ``mavlink``: lockstep simulation speed over loopback MAVLink with a client in the loop (× real
+  time), and the app's state-in → setpoint-out latency (median, p99 ms at 250 Hz).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+from collections.abc import Callable
+from typing import Any
+
+# section -> (module, function) returning a flat dict of figures; imported only when run.
+SECTIONS: tuple[tuple[str, str, str], ...] = (
+    ("core", "pf_offboard.bench.core", "run"),
+    ("sim", "sitl_mock.bench", "run_inprocess"),
+    ("mavlink", "sitl_mock.bench", "run_lockstep"),
+    ("latency", "pf_offboard.bench.latency", "run"),
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--only",
+        choices=[name for name, _, _ in SECTIONS],
+        action="append",
+        help="run only this section (repeatable); default: all",
+    )
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    parser.add_argument("--quick", action="store_true", help="fewer samples (smoke run)")
+
+
+def _section(module_name: str, func_name: str) -> Callable[..., dict[str, Any]]:
+    return getattr(importlib.import_module(module_name), func_name)
+
+
+def run(args: argparse.Namespace) -> int:
+    chosen = args.only or [name for name, _, _ in SECTIONS]
+    results: dict[str, dict[str, Any]] = {}
+    for name, module_name, func_name in SECTIONS:
+        if name not in chosen:
+            continue
+        results[name] = _section(module_name, func_name)(quick=args.quick)
+        if not args.json:
+            print(f"[{name}]")
+            for key, value in results[name].items():
+                shown = f"{value:.4g}" if isinstance(value, float) else str(value)
+                print(f"  {key:<40} {shown}")
+    if args.json:
+        print(json.dumps(results, indent=2, sort_keys=True))
+    return 0
