@@ -18,8 +18,8 @@ from typing import Any
 # section -> (module, function) returning a flat dict of figures; imported only when run.
 SECTIONS: tuple[tuple[str, str, str], ...] = (
     ("core", "pf_offboard.bench.core", "run"),
-    ("sim", "sitl_mock.bench", "run_inprocess"),
-    ("mavlink", "sitl_mock.bench", "run_lockstep"),
+    ("sim", "sitl_mock.dynamics.bench", "run_inprocess"),
+    ("mavlink", "sitl_mock.bench_lockstep", "run_lockstep"),
     ("latency", "pf_offboard.bench.latency", "run"),
 )
 
