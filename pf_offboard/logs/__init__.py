@@ -5,11 +5,14 @@
 light (no matplotlib).
 """
 
+from pf_offboard.logs.flightlog import FlightLog, FlightLogPaths
 from pf_offboard.logs.steplog import COLUMNS, StepLogWriter, StepRecord, read_steplog
 from pf_offboard.logs.tlog import OWN_COMPONENT_ID, LogError, TlogEntry, TlogWriter, iter_tlog, read_tlog
 
 __all__ = [
     "COLUMNS",
+    "FlightLog",
+    "FlightLogPaths",
     "OWN_COMPONENT_ID",
     "LogError",
     "StepLogWriter",

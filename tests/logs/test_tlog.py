@@ -109,3 +109,18 @@ def test_missing_and_empty_files_are_input_errors(tmp_path: Path) -> None:
 def test_writer_rejects_non_frames(tmp_path: Path) -> None:
     with TlogWriter.open(tmp_path / "a.tlog") as w, pytest.raises(ValueError, match="not a MAVLink frame"):
         w.write(b"hello", T0)
+
+
+def test_flight_log_writes_siblings(tmp_path: Path) -> None:
+    from pf_offboard.logs.flightlog import FlightLog, FlightLogPaths
+
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("speed_m_s: 1.0\n")
+    ap = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    with FlightLog.open(tmp_path / "out", name="f1", config_path=cfg) as log:
+        log.frame(ap.heartbeat_encode(2, 12, 0, 0, 3, 3).pack(ap), T0)
+    paths = FlightLogPaths.beside(tmp_path / "out" / "f1.tlog")
+    assert paths == log.paths
+    assert paths.config_yaml.read_text() == "speed_m_s: 1.0\n"
+    assert [e.message.get_type() for e in read_tlog(paths.tlog)] == ["HEARTBEAT"]
+    assert paths.steps_csv.read_text().startswith("time_s,mode,active,")
