@@ -1,0 +1,215 @@
+"""``pf-offboard plot``: the paper's figures (Kumar & Gill, Figs. 4-9) from flight logs.
+
+- ``path3d.png`` — the reference path and every run's output trajectory with its start point
+  (Figs. 4 and 7): the legend gives each run's start position, or its speed at activation for
+  a thrown start;
+- ``<run>_tangential.png`` — η1 (arclength, m) and η2 (speed along the path, m/s) against time
+  with η2_ref (Figs. 5 and 8);
+- ``<run>_transversal.png`` — ξ1, φ1 (m) and ξ2, φ2 (m/s) against time (Figs. 6 and 9).
+
+Inputs are step-log CSVs (``flight.csv``) or ``.tlog`` files with their sibling CSV. The
+reference path comes from ``--config`` or the config copy beside the first log.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pf_offboard.errors import InputError
+from pf_offboard.logs.flightlog import FlightLogPaths
+from pf_offboard.logs.steplog import StepRecord, column, read_steplog
+
+_DPI = 110
+_THROW_SPEED_M_S = 0.5  # a start faster than this is labelled by its speed, like Fig. 7
+
+
+@dataclass(frozen=True)
+class Run:
+    """One flight's step log, ready to plot (times relative to the first record, s)."""
+
+    name: str
+    records: list[StepRecord]
+    t_s: NDArray[np.float64]
+    activation_s: tuple[float, ...]  # instants the follower was (re)activated, relative s
+
+    @classmethod
+    def from_records(cls, name: str, records: list[StepRecord]) -> Run:
+        if not records:
+            raise InputError(name, "step log has no rows")
+        t = column(records, "time_s")
+        t = t - t[0]
+        act: list[float] = []
+        prev = False
+        for ti, r in zip(t, records):
+            if (r.active and not prev) or r.event == "activated":
+                if not act or ti - act[-1] > 1e-9:
+                    act.append(float(ti))
+            prev = r.active
+        return cls(name, records, t, tuple(act))
+
+    @property
+    def first_active(self) -> int:
+        """Index of the first active step (0 when the log never activates)."""
+        return next((i for i, r in enumerate(self.records) if r.active), 0)
+
+    def col(self, name: str) -> NDArray[np.float64]:
+        return column(self.records, name)
+
+
+def load_run(path: str | Path) -> Run:
+    """A run from a step-log CSV, or from a ``.tlog`` through its sibling CSV."""
+    p = Path(path)
+    csv_path = FlightLogPaths.beside(p).steps_csv if p.suffix == ".tlog" else p
+    if not csv_path.exists():
+        raise InputError(str(p), f"no step log {csv_path.name} beside it (plot reads the per-step CSV)")
+    return Run.from_records(p.stem if p.stem != "flight" else p.parent.name or p.stem, read_steplog(csv_path))
+
+
+def _start_label(run: Run) -> str:
+    r = run.records[run.first_active]
+    x, y, z = r.position_enu_m
+    speed = float(np.linalg.norm(r.velocity_enu_m_s))
+    if speed > _THROW_SPEED_M_S:
+        return f"{run.name}: |v| = {speed:.1f} m/s at activation"
+    return f"{run.name}: start ({x:.1f}, {y:.1f}, {z:.1f}) m"
+
+
+def _reference_path(config_path: Path | None) -> NDArray[np.float64] | None:
+    if config_path is None:
+        return None
+    from pf_offboard.config import load_config  # the core; imported only when plotting a path
+
+    cfg = load_config(config_path)
+    path = cfg.path
+    lam = np.linspace(0.0, path.lam_max, 600)
+    return np.array([path.eval(float(x)).sigma for x in lam])
+
+
+def _mark_activation(ax: object, run: Run, label: bool) -> None:
+    for i, ta in enumerate(run.activation_s):
+        ax.axvline(ta, color="0.4", ls=":", lw=1.0, label="activation" if (label and i == 0) else None)  # type: ignore[attr-defined]
+
+
+def plot_path3d(runs: Sequence[Run], reference: NDArray[np.float64] | None, out: Path, title: str) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(6.4, 5.2))
+    ax = fig.add_subplot(projection="3d")
+    if reference is not None:
+        ax.plot(reference[:, 0], reference[:, 1], reference[:, 2], color="k", lw=2.2, label="reference path")
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, run in enumerate(runs):
+        c = colors[k % len(colors)]
+        p = run.col("position_enu_m")
+        ax.plot(p[:, 0], p[:, 1], p[:, 2], color=c, lw=1.2, label=_start_label(run))
+        ax.scatter(*p[0], color=c, marker="o", s=28, depthshade=False)
+        if run.first_active > 0:
+            ax.scatter(*p[run.first_active], color=c, marker="x", s=36, depthshade=False)
+    ax.set_xlabel("x east [m]")
+    ax.set_ylabel("y north [m]")
+    ax.set_zlabel("z up [m]")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(out, dpi=_DPI)
+    plt.close(fig)
+    return out
+
+
+def plot_tangential(run: Run, out: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 4.6))
+    a1.plot(run.t_s, run.col("eta1_m"), lw=1.3, label=r"$\eta_1$")
+    a1.set_ylabel(r"$\eta_1$ [m]")
+    a2.plot(run.t_s, run.col("eta2_m_s"), lw=1.3, label=r"$\eta_2$")
+    ref = run.col("speed_ref_m_s")
+    a2.plot(run.t_s, ref, "--", color="C3", lw=1.2, label=r"$\eta_2^{ref}$ = " + f"{ref[run.first_active]:.2f} m/s")
+    a2.set_ylabel(r"$\eta_2$ [m/s]")
+    a2.set_xlabel("time [s]")
+    for ax in (a1, a2):
+        _mark_activation(ax, run, label=True)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="best")
+    a1.set_title(f"Tangential states, {run.name}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=_DPI)
+    plt.close(fig)
+    return out
+
+
+def plot_transversal(run: Run, out: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, sharex=True, figsize=(7.6, 4.8))
+    panels = (
+        ("xi1_m", r"$\xi_1$ [m]"),
+        ("phi1_m", r"$\varphi_1$ [m]"),
+        ("xi2_m_s", r"$\xi_2$ [m/s]"),
+        ("phi2_m_s", r"$\varphi_2$ [m/s]"),
+    )
+    for ax, (name, label) in zip(axes.flat, panels):
+        ax.plot(run.t_s, run.col(name), lw=1.2, label=label.split(" ")[0])
+        ax.axhline(0.0, color="k", lw=0.6)
+        _mark_activation(ax, run, label=True)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="best")
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    fig.suptitle(f"Transversal states, {run.name}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=_DPI)
+    plt.close(fig)
+    return out
+
+
+def make_figures(
+    logs: Sequence[str | Path], out_dir: str | Path, config_path: str | Path | None = None, title: str | None = None
+) -> list[Path]:
+    """Write the figures for ``logs`` into ``out_dir``; returns the PNG paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    if not logs:
+        raise InputError("LOG", "give at least one log")
+    runs = [load_run(p) for p in logs]
+    names = [r.name for r in runs]
+    if len(set(names)) != len(names):  # two runs called "flight": number them
+        runs = [Run(f"{r.name}{i + 1}", r.records, r.t_s, r.activation_s) for i, r in enumerate(runs)]
+    cfg = Path(config_path) if config_path is not None else FlightLogPaths.beside(logs[0]).config_yaml
+    if config_path is not None and not cfg.exists():
+        raise InputError("--config", f"no such file: {cfg}")
+    reference = _reference_path(cfg if cfg.exists() else None)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    ref_speed = runs[0].records[runs[0].first_active].speed_ref_m_s
+    default_title = "Path following, " + r"$\eta_2^{ref}$" + (f" = {ref_speed:.2f} m/s" if math.isfinite(ref_speed) else "")
+    pngs = [plot_path3d(runs, reference, out / "path3d.png", title or default_title)]
+    for run in runs:
+        pngs.append(plot_tangential(run, out / f"{run.name}_tangential.png"))
+        pngs.append(plot_transversal(run, out / f"{run.name}_transversal.png"))
+    return pngs
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("logs", nargs="+", metavar="LOG", help="step-log CSVs or .tlog files (with their sibling .csv)")
+    parser.add_argument("--out", required=True, help="directory for the PNGs")
+    parser.add_argument("--config", help="config YAML for the reference path (default: the .yaml beside the first log)")
+    parser.add_argument("--title", help="title of the 3-D path figure")
+
+
+def run(args: argparse.Namespace) -> int:
+    for p in args.logs:
+        if not Path(p).exists():
+            raise InputError("LOG", f"no such file: {p}")
+    for png in make_figures(args.logs, args.out, args.config, args.title):
+        print(png)
+    return 0
