@@ -1,0 +1,54 @@
+"""pf-offboard: time-invariant quadrotor path following (Kumar & Gill) over MAVLink.
+
+The pure core is importable without any I/O::
+
+    from pf_offboard import Path, PathFollower
+    follower = PathFollower(Path.from_waypoints(points, closed=True), speed=1.5)
+    cmd = follower.update(position_enu_m, velocity_enu_m_s)
+
+Names are imported lazily (PEP 562) so that ``pf-offboard --help`` and light modules such as
+:mod:`pf_offboard.frames` do not pay for numpy/scipy set-up they do not use.
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.1.0"
+
+# public name -> defining module (a fixed table)
+_EXPORTS: dict[str, str] = {
+    "Path": "pf_offboard.path",
+    "Projector": "pf_offboard.path",
+    "PathFollower": "pf_offboard.control",
+    "Command": "pf_offboard.control",
+    "TransverseState": "pf_offboard.control",
+    "Saturation": "pf_offboard.control",
+    "Gains": "pf_offboard.control",
+    "Limits": "pf_offboard.control",
+    "YawSpec": "pf_offboard.control",
+    "Config": "pf_offboard.config",
+    "load_config": "pf_offboard.config",
+    "parse_config": "pf_offboard.config",
+}
+
+__all__ = sorted(_EXPORTS)
+
+if TYPE_CHECKING:
+    from pf_offboard.config import Config, load_config, parse_config
+    from pf_offboard.control import Command, Gains, Limits, PathFollower, Saturation, TransverseState, YawSpec
+    from pf_offboard.path import Path, Projector
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'pf_offboard' has no attribute {name!r}")
+    value = getattr(import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

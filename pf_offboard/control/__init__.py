@@ -1,0 +1,30 @@
+"""Path-following control: exact transverse coordinates, TFL law with limits, feed-forward (issue 2).
+
+See docs/controller.md.
+"""
+
+from pf_offboard.control.follower import PathFollower, evaluate_terms
+from pf_offboard.control.transverse import ExactTerms, exact_terms
+from pf_offboard.control.types import (
+    GRAVITY_M_S2,
+    Command,
+    Gains,
+    Limits,
+    Saturation,
+    TransverseState,
+    YawSpec,
+)
+
+__all__ = [
+    "GRAVITY_M_S2",
+    "Command",
+    "ExactTerms",
+    "Gains",
+    "Limits",
+    "PathFollower",
+    "Saturation",
+    "TransverseState",
+    "YawSpec",
+    "evaluate_terms",
+    "exact_terms",
+]

@@ -1,0 +1,225 @@
+"""PathFollower: projection -> exact transverse coordinates -> TFL with limits -> feed-forward.
+
+Pure and I/O-free; the only state is the projector's warm start (time-invariant control law).
+World ENU z up, body FLU.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pf_offboard.control.feedforward import (
+    YawProfile,
+    attitude_from_thrust,
+    body_rates,
+    onpath_derivatives,
+    quaternion_from_axes,
+)
+from pf_offboard.control.law import ControlLaw, LawOutput
+from pf_offboard.control.transverse import ExactTerms, exact_terms
+from pf_offboard.control.types import (
+    GRAVITY_M_S2,
+    Command,
+    Gains,
+    Limits,
+    Saturation,
+    TransverseState,
+    YawSpec,
+)
+from pf_offboard.errors import InputError
+from pf_offboard.frames import wrap_pi
+
+if TYPE_CHECKING:
+    from pf_offboard.config import Config
+    from pf_offboard.path import Path
+
+G = GRAVITY_M_S2
+Vec = tuple[float, float, float]
+MAX_SPEED_M_S = 20.0
+
+# Tube measure q = <sigma'', r>/|sigma'|^2 (= kappa xi1 for the Frenet frame): the exact law is
+# used for q <= TUBE_INNER, the approach fallback for q >= TUBE_OUTER, a convex blend in between
+# (the feasible set is convex, so the blend is feasible too).
+TUBE_INNER = 0.8
+TUBE_OUTER = 0.9
+# Past an open path's end the approach to the end point takes over within this distance (m).
+END_BLEND_M = 0.05
+
+
+def evaluate_terms(path: Path, lam: float, position: ArrayLike, velocity: ArrayLike) -> ExactTerms:
+    """T(x), alpha, beta at a given closest-point parameter ``lam`` (no projection, no state)."""
+    s = path.eval_floats(lam)
+    (_, _, _), (e2, de2, dde2), (e3, de3, dde3) = path.frame_jets(lam)
+    y = _vec(position, "position")
+    v = _vec(velocity, "velocity")
+    return exact_terms(
+        path.arclength(lam), s[0:3], s[3:6], s[6:9], s[9:12], e2, de2, dde2, e3, de3, dde3, y, v
+    )
+
+
+def _vec(value: ArrayLike, name: str) -> Vec:
+    p = value.tolist() if isinstance(value, np.ndarray) else value
+    try:
+        if len(p) != 3:  # type: ignore[arg-type]
+            raise InputError(name, f"expected 3 numbers (m, ENU), got {len(p)}")  # type: ignore[arg-type]
+        x, y, z = float(p[0]), float(p[1]), float(p[2])  # type: ignore[index]
+    except (TypeError, ValueError):
+        raise InputError(name, f"expected 3 numbers, got {value!r}") from None
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        raise InputError(name, f"not finite: {[x, y, z]}")
+    return x, y, z
+
+
+class PathFollower:
+    """Time-invariant path-following controller of Kumar & Gill for one path.
+
+    ``speed``: eta2_ref (m/s); its sign picks the direction of travel along the path parameter.
+    ``projector``: anything with ``update(position) -> lam`` and ``reset()``; default
+    :class:`pf_offboard.path.Projector`.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        speed: float = 1.5,
+        *,
+        gains: Gains | None = None,
+        yaw: YawSpec | None = None,
+        limits: Limits | None = None,
+        projector: Any = None,
+    ) -> None:
+        speed = float(speed)
+        if not math.isfinite(speed) or speed == 0.0 or abs(speed) > MAX_SPEED_M_S:
+            raise InputError("speed_m_s", f"must be non-zero with |speed| <= {MAX_SPEED_M_S} m/s, got {speed}")
+        self.path = path
+        self.speed = speed
+        self.gains = gains if gains is not None else Gains()
+        self.yaw = yaw if yaw is not None else YawSpec()
+        self.limits = limits if limits is not None else Limits()
+        if projector is None:
+            from pf_offboard.path import Projector
+
+            projector = Projector(path)
+        self.projector = projector
+        self.law = ControlLaw(self.gains, self.limits)
+        self._yaw = YawProfile(self.yaw, path.length_m, path.closed, speed)
+        self._closed = bool(path.closed)
+        self._lam_max = float(path.lam_max)
+        self._length = float(path.length_m)
+        self._eval = path.eval_floats
+        self._jets = path.frame_jets
+        self._arclength = path.arclength
+
+    @classmethod
+    def from_config(cls, config: Config | str | os.PathLike[str]) -> PathFollower:
+        """Build the path and follower from a YAML file (or a loaded :class:`~pf_offboard.config.Config`)."""
+        from pf_offboard.config import Config, load_config
+        from pf_offboard.path import Path
+
+        cfg = config if isinstance(config, Config) else load_config(config)
+        path = Path.from_waypoints(cfg.path.waypoints_enu_m, closed=cfg.path.closed, frame=cfg.path.moving_frame)
+        return cls(path, cfg.speed_m_s, gains=cfg.gains, yaw=cfg.yaw, limits=cfg.limits)
+
+    def reset(self) -> None:
+        """Forget the projection warm start (e.g. after an estimator reset or a position jump)."""
+        self.projector.reset()
+
+    # ------------------------------------------------------------------ exact coordinates
+    def _terms(self, y: Vec, v: Vec) -> tuple[float, tuple[float, ...], ExactTerms]:
+        lam = float(self.projector.update(y))
+        s = self._eval(lam)
+        (_, _, _), (e2, de2, dde2), (e3, de3, dde3) = self._jets(lam)
+        terms = exact_terms(
+            self._arclength(lam), s[0:3], s[3:6], s[6:9], s[9:12], e2, de2, dde2, e3, de3, dde3, y, v
+        )
+        return lam, s, terms
+
+    def transverse_state(self, position: ArrayLike, velocity: ArrayLike) -> TransverseState:
+        """T(x) = (eta1, eta2, xi1, xi2, phi1, phi2) (m, m/s) at this state (updates the warm start)."""
+        return self._terms(_vec(position, "position"), _vec(velocity, "velocity"))[2].state
+
+    def decoupling(self, position: ArrayLike, velocity: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(alpha (3,), beta (3, 3)) with d/dt (eta2, xi2, phi2) = alpha + beta a (updates the warm start)."""
+        t = self._terms(_vec(position, "position"), _vec(velocity, "velocity"))[2]
+        return np.array(t.alpha), np.array((t.beta1, t.beta2, t.beta3))
+
+    # ------------------------------------------------------------------ control
+    def reference_speed(self, eta1: float) -> float:
+        """eta2_ref at arclength eta1: ``speed``, slowed down to stop at the end of an open path."""
+        if self._closed:
+            return self.speed
+        ahead = self._length - eta1 if self.speed > 0.0 else eta1
+        stop = self.law.stopping_speed(ahead)
+        return self.speed if abs(self.speed) <= stop else math.copysign(stop, self.speed)
+
+    def update(self, position: ArrayLike, velocity: ArrayLike) -> Command:
+        """One control step at position (m) and velocity (m/s), world ENU.
+
+        Raises :class:`InputError` for non-finite input (never a command computed from NaN).
+        """
+        y = _vec(position, "position")
+        v = _vec(velocity, "velocity")
+        lam, s, terms = self._terms(y, v)
+        st = terms.state
+        eta2_ref = self.reference_speed(st.eta1)
+        # blend weight of the approach fallback
+        w = (terms.tube - TUBE_INNER) / (TUBE_OUTER - TUBE_INNER)
+        if not self._closed and (lam <= 0.0 or lam >= self._lam_max):
+            out = terms.tangential_offset_m if lam > 0.0 else -terms.tangential_offset_m
+            w = max(w, out / END_BLEND_M)
+        w = 0.0 if w <= 0.0 else (1.0 if w >= 1.0 else w)
+        law = self.law
+        tube: LawOutput | None = law.tube(terms, eta2_ref) if w < 1.0 else None
+        if tube is None:
+            w = 1.0
+        r = (y[0] - s[0], y[1] - s[1], y[2] - s[2])
+        if w > 0.0:
+            app = law.approach(r, v)
+            if tube is None:
+                res = app
+            else:
+                k = 1.0 - w
+                res = LawOutput(
+                    (
+                        k * tube.accel[0] + w * app.accel[0],
+                        k * tube.accel[1] + w * app.accel[1],
+                        k * tube.accel[2] + w * app.accel[2],
+                    ),
+                    tube.tangential or app.tangential,
+                    tube.transversal or app.transversal,
+                    tube.approach_speed or app.approach_speed,
+                )
+        else:
+            assert tube is not None
+            res = tube
+        ax, ay, az = res.accel
+        f = (ax, ay, az + G)
+        thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        tilt, thrust_sat = law.thrust_set.active(f)
+        # feed-forward: on-path motion at eta2_ref (eqs. 25-27 via arclength derivatives)
+        tan, sss_ss, sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
+        psi, dpsi = self._yaw.evaluate(st.eta1, tan, sss_ss)
+        eta2 = st.eta2 if w == 0.0 else (1.0 - w) * st.eta2 + w * (tan[0] * v[0] + tan[1] * v[1] + tan[2] * v[2])
+        yaw_rate = dpsi * eta2
+        k3 = (1.0 - w) * eta2_ref * eta2_ref * eta2_ref
+        jerk = (sss[0] * k3, sss[1] * k3, sss[2] * k3)
+        axes = attitude_from_thrust(f, psi)
+        q = quaternion_from_axes(*axes)
+        omega = body_rates(axes, thrust, jerk, yaw_rate)
+        return Command(
+            acceleration=np.array(res.accel),
+            thrust=thrust,
+            attitude=np.array(q),
+            body_rates=np.array(omega),
+            yaw=wrap_pi(psi),
+            yaw_rate=yaw_rate,
+            state=st,
+            lam=lam,
+            cross_track_m=math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]),
+            saturation=Saturation(res.tangential, res.transversal, tilt, thrust_sat, res.approach_speed),
+        )

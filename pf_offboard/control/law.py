@@ -1,0 +1,162 @@
+"""The control law: TFL (eqs. 21-23) with limits, transversal correction first.
+
+Near the path the transversal law is the paper's linear PD ``u = -kp e - kd e_dot`` on
+``e = (xi1, phi1)``. It is written in nested form ``u = kd (v_d(e) - e_dot)`` with
+``v_d = -(kp/kd) e``; far from the path the desired approach speed ``|v_d|`` is limited by
+``max_approach_speed`` and by ``sqrt(2 a_dec |e|)`` (arrive without overshoot), and ``|u|`` by the
+acceleration every direction can deliver. The tangential law is the velocity loop
+``u_eta = kd_t (eta2_ref - eta2)``.
+
+Priority allocation in acceleration space: with ``M = beta^-1`` (columns m1, m2, m3),
+``a = -M alpha + m2 u_xi + m3 u_phi + m1 u_eta``. The feasible thrust set is convex, so the
+``u_eta`` that keep ``a`` feasible form one interval: u_eta is clipped into it. If the interval is
+empty the transversal correction is scaled down (bisection) until it is not.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from pf_offboard.control.feasible import ThrustSet
+from pf_offboard.control.transverse import ExactTerms, inverse_columns
+from pf_offboard.control.types import GRAVITY_M_S2, Gains, Limits
+
+Vec = tuple[float, float, float]
+G = GRAVITY_M_S2
+
+# Share of the guaranteed acceleration used to plan the approach deceleration (the rest is
+# margin for the feedback and for the path's own curvature terms in alpha).
+APPROACH_DECEL_SHARE = 0.5
+_BISECTION_STEPS = 16
+
+
+class LawOutput(NamedTuple):
+    accel: Vec  # m/s^2 ENU, gravity excluded
+    tangential: bool
+    transversal: bool
+    approach_speed: bool
+
+
+class ControlLaw:
+    """Pure: transverse terms (or an approach target) in, feasible acceleration out."""
+
+    def __init__(self, gains: Gains, limits: Limits) -> None:
+        self.gains = gains
+        self.limits = limits
+        self.kp = gains.transversal_kp
+        self.kd = gains.transversal_kd
+        self.k_pos = self.kp / self.kd  # 1/s: approach speed per metre of offset (linear region)
+        self.kd_t = gains.tangential_kd
+        self.k_pos_t = gains.tangential_kp / gains.tangential_kd
+        self.thrust_set = ThrustSet(limits.min_thrust_m_s2, limits.max_thrust_m_s2, limits.tan_tilt)
+        self.u_max = limits.guaranteed_accel_m_s2
+        self.a_dec = APPROACH_DECEL_SHARE * self.u_max
+        self.v_app = limits.max_approach_speed_m_s
+
+    # ------------------------------------------------------------------ building blocks
+    def approach_speed(self, dist_m: float) -> tuple[float, bool]:
+        """Desired speed toward the target at distance ``dist_m`` and whether the speed limit binds."""
+        lin = self.k_pos * dist_m
+        brake = math.sqrt(2.0 * self.a_dec * dist_m)
+        v = lin if lin < brake else brake
+        if self.v_app < v:
+            return self.v_app, True
+        return v, False
+
+    def stopping_speed(self, dist_m: float) -> float:
+        """Tangential speed limit that stops at the end of an open path ``dist_m`` ahead."""
+        if dist_m <= 0.0:
+            return 0.0
+        lin = self.k_pos_t * dist_m
+        brake = math.sqrt(2.0 * self.a_dec * dist_m)
+        return lin if lin < brake else brake
+
+    def transversal(self, xi1: float, xi2: float, phi1: float, phi2: float) -> tuple[float, float, bool, bool]:
+        """(u_xi, u_phi, reduced, approach_limited) of the nested saturated PD."""
+        d = math.hypot(xi1, phi1)
+        if d > 0.0:
+            speed, limited = self.approach_speed(d)
+            k = speed / d
+            vx, vy = -k * xi1, -k * phi1
+        else:
+            vx = vy = 0.0
+            limited = False
+        ux = self.kd * (vx - xi2)
+        uy = self.kd * (vy - phi2)
+        n = math.hypot(ux, uy)
+        if n > self.u_max:
+            k = self.u_max / n
+            return ux * k, uy * k, True, limited
+        return ux, uy, False, limited
+
+    # ------------------------------------------------------------------ the two laws
+    def tube(self, terms: ExactTerms, eta2_ref: float) -> LawOutput | None:
+        """Exact TFL with limits inside the tube; None if beta is singular."""
+        cols = inverse_columns(terms.beta1, terms.beta2, terms.beta3)
+        if cols is None:
+            return None
+        m1, m2, m3 = cols
+        st = terms.state
+        al1, al2, al3 = terms.alpha
+        u_xi, u_phi, reduced, limited = self.transversal(st.xi1, st.xi2, st.phi1, st.phi2)
+        u_eta = self.kd_t * (eta2_ref - st.eta2)
+        # a_b: keeps (eta2, xi2, phi2) constant; a_t: transversal correction
+        bx = -(m1[0] * al1 + m2[0] * al2 + m3[0] * al3)
+        by = -(m1[1] * al1 + m2[1] * al2 + m3[1] * al3)
+        bz = -(m1[2] * al1 + m2[2] * al2 + m3[2] * al3)
+        tx = m2[0] * u_xi + m3[0] * u_phi
+        ty = m2[1] * u_xi + m3[1] * u_phi
+        tz = m2[2] * u_xi + m3[2] * u_phi
+        ts = self.thrust_set
+        mu = 1.0
+        iv = ts.line_interval((bx + tx, by + ty, bz + tz + G), m1)
+        if iv is None:
+            reduced = True
+            if ts.line_interval((bx, by, bz + G), m1) is None:
+                # Even coasting is infeasible (e.g. far too fast around a bend): best effort, clipped.
+                f = ts.clip((bx + tx, by + ty, bz + tz + G))
+                return LawOutput((f[0], f[1], f[2] - G), True, True, limited)
+            lo, hi = 0.0, 1.0
+            for _ in range(_BISECTION_STEPS):
+                mid = 0.5 * (lo + hi)
+                if ts.line_interval((bx + mid * tx, by + mid * ty, bz + mid * tz + G), m1) is None:
+                    hi = mid
+                else:
+                    lo = mid
+            mu = lo
+            iv = ts.line_interval((bx + mu * tx, by + mu * ty, bz + mu * tz + G), m1)
+            assert iv is not None
+        clipped = False
+        if u_eta < iv[0]:
+            u_eta = iv[0]
+            clipped = True
+        elif u_eta > iv[1]:
+            u_eta = iv[1]
+            clipped = True
+        a = (
+            bx + mu * tx + m1[0] * u_eta,
+            by + mu * ty + m1[1] * u_eta,
+            bz + mu * tz + m1[2] * u_eta,
+        )
+        return LawOutput(a, clipped, reduced, limited)
+
+    def approach(self, r: Vec, v: Vec, target_velocity: Vec = (0.0, 0.0, 0.0)) -> LawOutput:
+        """Fallback outside the tube / past an open path's end: fly to the point ``y - r`` with limits."""
+        d = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+        if d > 0.0:
+            speed, limited = self.approach_speed(d)
+            k = speed / d
+        else:
+            k, limited = 0.0, False
+        ax = self.kd * (target_velocity[0] - k * r[0] - v[0])
+        ay = self.kd * (target_velocity[1] - k * r[1] - v[1])
+        az = self.kd * (target_velocity[2] - k * r[2] - v[2])
+        n = math.sqrt(ax * ax + ay * ay + az * az)
+        reduced = False
+        if n > self.u_max:
+            s = self.u_max / n
+            ax, ay, az = ax * s, ay * s, az * s
+            reduced = True
+        f = self.thrust_set.clip((ax, ay, az + G))
+        return LawOutput((f[0], f[1], f[2] - G), True, reduced, limited)

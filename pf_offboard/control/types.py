@@ -1,0 +1,198 @@
+"""Value objects of the controller: gains, limits, yaw specification, state and command.
+
+World frame ENU (z up), body FLU, quaternions (w, x, y, z) body-to-world. Units are in the names.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pf_offboard.errors import InputError
+
+GRAVITY_M_S2 = 9.81  # the paper's g
+
+
+def _finite(name: str, value: float) -> float:
+    v = float(value)
+    if not math.isfinite(v):
+        raise InputError(name, f"must be a finite number, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Loop gains as bandwidth [Hz] and damping ratio (the paper: 6 Hz / 0.7 and 4 Hz / 0.8).
+
+    Transversal (xi, phi): ``u = -kp e - kd e_dot`` with ``w = 2 pi f``, ``kp = w^2``,
+    ``kd = 2 zeta w``. Tangential: velocity loop ``u_eta = kd_t (eta2_ref - eta2)``,
+    ``kd_t = 2 zeta_t w_t`` (see docs/controller.md).
+    """
+
+    transversal_bandwidth_hz: float = 6.0
+    transversal_damping: float = 0.7
+    tangential_bandwidth_hz: float = 4.0
+    tangential_damping: float = 0.8
+
+    def __post_init__(self) -> None:
+        for name in ("transversal_bandwidth_hz", "transversal_damping", "tangential_bandwidth_hz", "tangential_damping"):
+            v = _finite(name, getattr(self, name))
+            if v <= 0.0:
+                raise InputError(name, f"must be > 0, got {v}")
+        for name in ("transversal_bandwidth_hz", "tangential_bandwidth_hz"):
+            if getattr(self, name) > 50.0:
+                raise InputError(name, f"must be <= 50 Hz, got {getattr(self, name)}")
+        for name in ("transversal_damping", "tangential_damping"):
+            if getattr(self, name) > 5.0:
+                raise InputError(name, f"must be <= 5, got {getattr(self, name)}")
+
+    @property
+    def transversal_kp(self) -> float:
+        """1/s^2."""
+        w = 2.0 * math.pi * self.transversal_bandwidth_hz
+        return w * w
+
+    @property
+    def transversal_kd(self) -> float:
+        """1/s."""
+        return 2.0 * self.transversal_damping * 2.0 * math.pi * self.transversal_bandwidth_hz
+
+    @property
+    def tangential_kd(self) -> float:
+        """1/s (tangential velocity-loop gain)."""
+        return 2.0 * self.tangential_damping * 2.0 * math.pi * self.tangential_bandwidth_hz
+
+    @property
+    def tangential_kp(self) -> float:
+        """1/s^2, used only to stop at the end of an open path."""
+        w = 2.0 * math.pi * self.tangential_bandwidth_hz
+        return w * w
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What the vehicle can do. f = a + g e_z is the mass-normalised thrust vector.
+
+    Enforced on every command: angle of f from vertical <= ``max_tilt_deg``,
+    ``|f| <= max_thrust_m_s2``, vertical component ``f_z >= min_thrust_m_s2`` (which implies
+    ``|f| >= min_thrust_m_s2``), and the commanded speed of approach to the path <=
+    ``max_approach_speed_m_s``.
+    """
+
+    max_tilt_deg: float = 35.0
+    min_thrust_m_s2: float = 2.0
+    max_thrust_m_s2: float = 20.0
+    max_approach_speed_m_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s"):
+            _finite(name, getattr(self, name))
+        if not 0.0 < self.max_tilt_deg <= 80.0:
+            raise InputError("max_tilt_deg", f"must be in (0, 80] deg, got {self.max_tilt_deg}")
+        if not 0.0 <= self.min_thrust_m_s2 <= 0.9 * GRAVITY_M_S2:
+            raise InputError("min_thrust_m_s2", f"must be in [0, {0.9 * GRAVITY_M_S2:.3f}] m/s^2, got {self.min_thrust_m_s2}")
+        if not 1.1 * GRAVITY_M_S2 <= self.max_thrust_m_s2 <= 100.0:
+            raise InputError(
+                "max_thrust_m_s2", f"must be in [{1.1 * GRAVITY_M_S2:.3f}, 100] m/s^2 (above hover), got {self.max_thrust_m_s2}"
+            )
+        if not 0.05 <= self.max_approach_speed_m_s <= 20.0:
+            raise InputError("max_approach_speed_m_s", f"must be in [0.05, 20] m/s, got {self.max_approach_speed_m_s}")
+
+    @property
+    def tan_tilt(self) -> float:
+        return math.tan(math.radians(self.max_tilt_deg))
+
+    @property
+    def guaranteed_accel_m_s2(self) -> float:
+        """Radius of the ball of accelerations around hover that is entirely feasible (m/s^2)."""
+        g = GRAVITY_M_S2
+        # distance from (0, 0, g) to the tilt cone, to the max-thrust sphere and to f_z = min thrust
+        cone = g * math.sin(math.radians(self.max_tilt_deg))
+        return min(cone, self.max_thrust_m_s2 - g, g - self.min_thrust_m_s2)
+
+
+YAW_MODES = ("constant", "tangent", "table")
+
+
+@dataclass(frozen=True)
+class YawSpec:
+    """Yaw as a function of arclength eta1 (ENU yaw: from east, counter-clockwise, radians).
+
+    - ``constant``: ``yaw_rad``.
+    - ``tangent``: heading of the direction of travel (``sign(speed) * t``) plus ``yaw_rad``.
+    - ``table``: ``table_eta1_m_yaw_rad`` = ((eta1_m, yaw_rad), ...), interpolated by a C2 cubic
+      spline (periodic on closed paths, angles unwrapped).
+    """
+
+    mode: str = "constant"
+    yaw_rad: float = 0.0
+    table_eta1_m_yaw_rad: tuple[tuple[float, float], ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        if self.mode not in YAW_MODES:
+            raise InputError("yaw.mode", f"must be one of {', '.join(YAW_MODES)}, got {self.mode!r}")
+        _finite("yaw.yaw_rad", self.yaw_rad)
+        table = tuple((float(a), float(b)) for a, b in self.table_eta1_m_yaw_rad)
+        object.__setattr__(self, "table_eta1_m_yaw_rad", table)
+        for i, (s, y) in enumerate(table):
+            if not (math.isfinite(s) and math.isfinite(y)):
+                raise InputError(f"yaw.table[{i}]", "must be finite numbers")
+        if self.mode == "table":
+            if len(table) < 2:
+                raise InputError("yaw.table", "needs at least 2 (eta1_m, yaw) entries")
+            for i in range(1, len(table)):
+                if table[i][0] <= table[i - 1][0]:
+                    raise InputError(f"yaw.table[{i}]", "eta1 values must be strictly increasing")
+
+    @classmethod
+    def constant(cls, yaw_rad: float = 0.0) -> YawSpec:
+        return cls("constant", yaw_rad)
+
+    @classmethod
+    def tangent(cls, offset_rad: float = 0.0) -> YawSpec:
+        return cls("tangent", offset_rad)
+
+    @classmethod
+    def table(cls, points: tuple[tuple[float, float], ...] | list[list[float]]) -> YawSpec:
+        return cls("table", 0.0, tuple((float(a), float(b)) for a, b in points))
+
+
+class TransverseState(NamedTuple):
+    """T(x) of eq. (20): tangential position (m) and speed (m/s), transversal offsets (m) and rates (m/s)."""
+
+    eta1: float
+    eta2: float
+    xi1: float
+    xi2: float
+    phi1: float
+    phi2: float
+
+
+class Saturation(NamedTuple):
+    """Which limit shaped the command this step."""
+
+    tangential: bool  # tangential acceleration reduced to make room for the transversal correction
+    transversal: bool  # transversal correction itself reduced (acceleration bound or no room)
+    tilt: bool  # thrust vector on the tilt cone
+    thrust: bool  # thrust on its min or max bound
+    approach_speed: bool  # desired approach speed clipped to max_approach_speed_m_s
+
+
+@dataclass(frozen=True)
+class Command:
+    """One control output. World ENU, body FLU."""
+
+    acceleration: NDArray[np.float64]  # (3,) m/s^2, gravity excluded (the a of eq. 1)
+    thrust: float  # mass-normalised collective thrust |f|, m/s^2
+    attitude: NDArray[np.float64]  # (4,) unit quaternion (w, x, y, z) body FLU -> world ENU
+    body_rates: NDArray[np.float64]  # (3,) rad/s body FLU (the feed-forward omega_ff)
+    yaw: float  # rad, ENU
+    yaw_rate: float  # rad/s about world z (up)
+    state: TransverseState
+    lam: float  # path parameter of the closest point
+    cross_track_m: float  # distance to the closest point of the path
+    saturation: Saturation
