@@ -1,0 +1,650 @@
+"""The bridge: activation, watchdog and mode logic between the pipeline and the link.
+
+Backends (:mod:`.encoders`) only encode; every decision about *whether* and *what* to send lives
+here. The decision rules are small pure classes (:class:`ThrowTrigger`, :class:`LapCounter`,
+:func:`end_reason`) tested on their own; :class:`Bridge` wires them to a :class:`~.link.Link`.
+
+Phases: ``preflight`` → (``takeoff``) → ``waiting`` (throw) / ``engaging`` → ``following`` →
+``handing_back`` → ``done``; or ``taken_over`` (the operator switched the mode away: we stop
+sending at once and never re-engage), or ``failed``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import math
+import struct
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, TextIO
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from pf_offboard.app.encoders import position_setpoint, yaw_of
+from pf_offboard.app.estimator import StateEstimate
+from pf_offboard.app.link import Link
+from pf_offboard.app.pipeline import Pipeline, Step, time_boot_ms
+from pf_offboard.app.profiles import Autopilot, ModeRequest, Profile, is_armed
+from pf_offboard.errors import InputError, LinkError
+
+# Exit codes of `pf-offboard fly` (documented in docs/app.md).
+EXIT_OK = 0
+EXIT_INPUT = 2
+EXIT_LINK = 3  # no heartbeat, refused command, lost telemetry
+EXIT_TAKEOVER = 4  # the operator took the vehicle back; we yielded
+
+
+class Phase(enum.Enum):
+    PREFLIGHT = "preflight"
+    TAKEOFF = "takeoff"
+    WAITING = "waiting"  # throw launch: proof-of-life while the vehicle is carried / thrown
+    ENGAGING = "engaging"  # mode switch to OFFBOARD / GUIDED requested, not yet confirmed
+    FOLLOWING = "following"
+    HANDING_BACK = "handing_back"
+    DONE = "done"
+    TAKEN_OVER = "taken_over"
+    FAILED = "failed"
+
+
+# ---------------------------------------------------------------------------- pure decision rules
+class ThrowTrigger:
+    """Fires once, the moment a thrown vehicle crosses the activation height.
+
+    Crossing in either direction counts (thrown up through H from the hand, or falling through H
+    after being thrown above it), but only while the vehicle is in free flight: speed at least
+    ``min_speed_m_s`` (a vehicle carried slowly past H does not fire) and ``confirm`` consecutive
+    samples on the far side of H (a single noisy sample does not fire). The first altitude seen
+    sets which side we start on; nothing fires until the vehicle has been seen on one side.
+    """
+
+    def __init__(self, height_m: float, min_speed_m_s: float = 0.5, confirm: int = 2) -> None:
+        if not (math.isfinite(height_m) and height_m > 0.0):
+            raise InputError("--throw", f"activation height must be > 0 m, got {height_m}")
+        self.height_m = height_m
+        self.min_speed_m_s = min_speed_m_s
+        self.confirm = confirm
+        self._side: bool | None = None  # True: above H
+        self._beyond = 0
+        self.fired = False
+
+    def update(self, altitude_m: float, speed_m_s: float) -> bool:
+        """Feed one state sample; True exactly once, on the confirming sample of a crossing."""
+        if self.fired:
+            return False
+        above = altitude_m >= self.height_m
+        if self._side is None:
+            self._side = above
+            return False
+        if above == self._side:
+            self._beyond = 0
+            return False
+        if speed_m_s < self.min_speed_m_s:
+            # a slow crossing (carried by hand, drifting): accept the new side without firing
+            self._side, self._beyond = above, 0
+            return False
+        self._beyond += 1
+        if self._beyond >= self.confirm:
+            self.fired = True
+            return True
+        return False
+
+
+class LapCounter:
+    """Laps travelled along the path from arclength samples (η1), either direction.
+
+    Closed paths: η1 wraps at the path length, so each difference is taken modulo the length
+    (the shorter way round). Open paths: plain differences.
+    """
+
+    def __init__(self, length_m: float, closed: bool) -> None:
+        self.length_m = length_m
+        self.closed = closed
+        self._last: float | None = None
+        self.travelled_m = 0.0
+
+    def update(self, eta1_m: float) -> float:
+        if not math.isfinite(eta1_m):
+            return self.laps
+        if self._last is not None:
+            d = eta1_m - self._last
+            if self.closed:
+                d = (d + 0.5 * self.length_m) % self.length_m - 0.5 * self.length_m
+            self.travelled_m += abs(d)
+        self._last = eta1_m
+        return self.laps
+
+    @property
+    def laps(self) -> float:
+        return self.travelled_m / self.length_m if self.length_m > 0 else 0.0
+
+
+@dataclass(frozen=True)
+class EndSpec:
+    """When path following ends (any that is set)."""
+
+    laps: float | None = None
+    duration_s: float | None = None  # vehicle time since activation
+    open_path_end: bool = True  # stop at the end of an open path
+
+
+def end_reason(
+    spec: EndSpec,
+    laps: float,
+    elapsed_s: float,
+    path_closed: bool,
+    lam: float,
+    lam_max: float,
+    speed_ref_m_s: float,
+    eta2_m_s: float,
+) -> str:
+    """Why following should end now ("" to continue). Pure."""
+    if spec.laps is not None and laps >= spec.laps:
+        return f"{spec.laps:g} laps done"
+    if spec.duration_s is not None and elapsed_s >= spec.duration_s:
+        return f"duration {spec.duration_s:g} s reached"
+    if spec.open_path_end and not path_closed and math.isfinite(lam):
+        at_end = lam >= lam_max - 1e-6 if speed_ref_m_s > 0 else lam <= 1e-6
+        if at_end and abs(eta2_m_s) < 0.1:
+            return "end of the open path reached"
+    return ""
+
+
+def param_value_decode(value: float, param_type: int, bytewise: bool) -> float:
+    """A PARAM_VALUE's value: PX4 packs INT32 bytewise into the float, ArduPilot casts."""
+    if bytewise and param_type in (mavlink2.MAV_PARAM_TYPE_INT32, mavlink2.MAV_PARAM_TYPE_UINT32):
+        return float(struct.unpack("<i", struct.pack("<f", value))[0])
+    return float(value)
+
+
+def param_value_encode(value: float, param_type: int, bytewise: bool) -> float:
+    """Inverse of :func:`param_value_decode` for PARAM_SET."""
+    if bytewise and param_type in (mavlink2.MAV_PARAM_TYPE_INT32, mavlink2.MAV_PARAM_TYPE_UINT32):
+        return float(struct.unpack("<f", struct.pack("<i", int(value)))[0])
+    return float(value)
+
+
+# ---------------------------------------------------------------------------- the bridge
+@dataclass(frozen=True)
+class BridgeOptions:
+    """How one flight is launched, flown and ended."""
+
+    launch: str  # "takeoff" | "airborne" | "throw"
+    height_m: float  # take-off altitude or throw activation height (m above home)
+    end: EndSpec
+    end_action: str = "hold"  # "hold" | "land"
+    setpoint_rate_hz: float = 50.0
+    state_timeout_s: float = 0.5
+    command_timeout_s: float = 5.0  # per mode / arm / param request (wall clock)
+    status: bool = True
+
+
+@dataclass
+class FlightResult:
+    exit_code: int
+    reason: str
+    activation_time_s: float | None = None
+    laps: float = 0.0
+    steps: int = 0
+
+
+class Bridge:
+    """Runs one flight over an open link (target known). Use ``await bridge.run()``."""
+
+    def __init__(
+        self,
+        link: Link,
+        profile: Profile,
+        pipeline: Pipeline,
+        options: BridgeOptions,
+        path_length_m: float,
+        path_closed: bool,
+        lam_max: float,
+        on_step: Callable[[Step], None] | None = None,
+        status_stream: TextIO | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.link = link
+        self.profile = profile
+        self.pipeline = pipeline
+        self.options = options
+        self.path_closed = path_closed
+        self.lam_max = lam_max
+        self.on_step = on_step
+        self.status_stream = status_stream if status_stream is not None else sys.stderr
+        self.clock = clock
+        self.phase = Phase.PREFLIGHT
+        self.laps = LapCounter(path_length_m, path_closed)
+        self.throw = ThrowTrigger(options.height_m) if options.launch == "throw" else None
+        self.custom_mode: int | None = None
+        self.base_mode = 0
+        self.offboard_seen = False  # OFFBOARD/GUIDED confirmed by HEARTBEAT while following
+        self.acks: dict[int, int] = {}
+        self.params: dict[str, float] = {}
+        self.activation_time_s: float | None = None
+        self.result: FlightResult | None = None
+        self.last_step: Step | None = None
+        self.steps = 0
+        self._last_setpoint: Any = None
+        self._last_send_wall = -math.inf
+        self._last_fresh_wall = -math.inf
+        self._takeoff_target: np.ndarray | None = None
+        self._takeoff_yaw = 0.0
+        self._changed = asyncio.Event()
+        self._stop = asyncio.Event()
+        self._end_reason = ""
+        self._rate_count = 0
+        self.loop_rate_hz = 0.0
+        self.sent_setpoints = 0
+        self._event = ""  # logged with the next step
+        # before activation, stream the follower's own (inactive) setpoints as proof of life
+        self._stream_follow_before_active = False
+
+    # ------------------------------------------------------------------ receive path (event loop callback)
+    def on_message(self, msg: Any) -> None:
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            target = self.link.target
+            if target is None or msg.get_srcComponent() == target.component:
+                self._on_heartbeat(msg)
+            return
+        if kind == "COMMAND_ACK":
+            self.acks[msg.command] = msg.result
+            self._changed.set()
+            return
+        if kind == "PARAM_VALUE":
+            pid = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
+            self.params[pid.rstrip("\x00")] = param_value_decode(
+                msg.param_value, msg.param_type, self.profile.autopilot is Autopilot.PX4
+            )
+            self._changed.set()
+            return
+        if kind == "STATUSTEXT":
+            text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
+            self._print(f"autopilot: {text.rstrip(chr(0))}")
+            return
+        if self.pipeline.on_message(msg):
+            self._last_fresh_wall = self.clock()
+            self._rate_count += 1
+            self._on_state()
+
+    def _on_heartbeat(self, msg: Any) -> None:
+        previous = self.custom_mode
+        self.custom_mode, self.base_mode = msg.custom_mode, msg.base_mode
+        self._changed.set()
+        offboard = self.profile.is_offboard(msg.custom_mode)
+        if self.phase is Phase.ENGAGING and offboard:
+            self._activate()
+        elif self.phase is Phase.FOLLOWING:
+            if offboard:
+                self.offboard_seen = True
+            elif self.offboard_seen:
+                # The operator (RC / ground station) took over: yield at once, never re-engage.
+                self.phase = Phase.TAKEN_OVER
+                self._last_setpoint = None
+                old = self.profile.mode_name(previous) if previous is not None else "?"
+                self._finish(EXIT_TAKEOVER, f"mode changed {old} -> {self.profile.mode_name(msg.custom_mode)} by someone else; stopped sending, not re-engaging")
+
+    def _on_state(self) -> None:
+        est = self.pipeline.estimator.latest
+        assert est is not None
+        phase = self.phase
+        if phase in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
+            return
+        if phase is Phase.FOLLOWING:
+            step = self.pipeline.step("following", True, self._pending_event())
+            if step is not None:
+                self._follow_step(step)
+            return
+        if phase is Phase.HANDING_BACK:
+            self.pipeline.mark_consumed()
+            # keep the stream (and a lockstep clock) going with the hold until the mode changes
+            self._send(self.pipeline.encoder.hold(est, time_boot_ms(est)).message)
+            return
+        if phase is Phase.TAKEOFF and self._takeoff_target is not None:
+            self.pipeline.mark_consumed()
+            self._send(position_setpoint(self.link.target.system, self.link.target.component, time_boot_ms(est), self._takeoff_target, self._takeoff_yaw))
+            return
+        if phase in (Phase.WAITING, Phase.ENGAGING, Phase.PREFLIGHT) and self._stream_follow_before_active:
+            # proof of life: the follower's own command, so the first active setpoint continues it
+            # from the throw trigger / mode request on these setpoints take effect: mark them active
+            step = self.pipeline.step(phase.value, phase is Phase.ENGAGING, self._pending_event())
+            if step is None:
+                return
+            self.last_step = step
+            if self.on_step is not None:
+                self.on_step(step)
+            self._send(step.setpoint)
+            if self.throw is not None and phase is Phase.WAITING:
+                altitude = float(est.position_enu_m[2])
+                if self.throw.update(altitude, float(np.linalg.norm(est.velocity_enu_m_s))):
+                    self._engage(f"throw activation at {altitude:.2f} m")
+                    self._request_offboard_nowait()
+            return
+        self.pipeline.mark_consumed()
+
+    def _pending_event(self) -> str:
+        ev, self._event = self._event, ""
+        return ev
+
+    def _follow_step(self, step: Step) -> None:
+        self.last_step = step
+        self.steps += 1
+        self._send(step.setpoint)
+        if self.on_step is not None:
+            self.on_step(step)
+        rec = step.record
+        laps = self.laps.update(rec.eta1_m)
+        elapsed = rec.time_s - (self.activation_time_s if self.activation_time_s is not None else rec.time_s)
+        reason = end_reason(
+            self.options.end, laps, elapsed, self.path_closed, rec.lam, self.lam_max, self.pipeline.speed_ref_m_s, rec.eta2_m_s
+        )
+        if reason:
+            self._end_reason = reason
+            self.phase = Phase.HANDING_BACK
+            self._changed.set()
+
+    def _engage(self, event: str) -> None:
+        """From now on the streamed setpoints are meant to fly (mode switch requested)."""
+        est = self.pipeline.estimator.latest
+        self.activation_time_s = est.time_s if est is not None else None
+        self._event = event
+        self.phase = Phase.ENGAGING
+
+    def _activate(self) -> None:
+        est = self.pipeline.estimator.latest
+        if self.activation_time_s is None and est is not None:
+            self.activation_time_s = est.time_s
+        self._event = self._event or "activated"
+        self.phase = Phase.FOLLOWING
+        self.offboard_seen = True
+        self._changed.set()
+
+    # ------------------------------------------------------------------ sending
+    def _send(self, msg: Any) -> None:
+        self.link.send(msg)
+        self._last_setpoint = msg
+        self._last_send_wall = self.clock()
+        self.sent_setpoints += 1
+
+    def _command(self, command: int, *params: float) -> None:
+        p = list(params) + [0.0] * (7 - len(params))
+        self.acks.pop(command, None)
+        t = self.link.target
+        self.link.send(mavlink2.MAVLink_command_long_message(t.system, t.component, command, 0, *p))
+
+    def _set_mode_nowait(self, mode: ModeRequest) -> None:
+        self._command(mavlink2.MAV_CMD_DO_SET_MODE, 1.0, mode.param2, mode.param3)
+
+    def _request_offboard_nowait(self) -> None:
+        if not is_armed(self.base_mode):
+            self._command(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+        self._set_mode_nowait(self.profile.offboard)
+
+    async def _wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+        deadline = self.clock() + timeout_s
+        while not predicate():
+            remaining = deadline - self.clock()
+            if remaining <= 0 or self._stop.is_set():
+                return predicate()
+            self._changed.clear()
+            try:
+                await asyncio.wait_for(self._changed.wait(), min(remaining, 0.1))
+            except TimeoutError:
+                pass
+        return True
+
+    async def _command_confirmed(self, what: str, send: Callable[[], None], confirmed: Callable[[], bool], command: int) -> None:
+        """Send, re-send every 0.5 s until ``confirmed()``; LinkError on refusal or timeout."""
+        deadline = self.clock() + self.options.command_timeout_s
+        while True:
+            send()
+            if await self._wait_until(lambda: confirmed() or self.acks.get(command, 0) not in (0, 5), 0.5):
+                if confirmed():
+                    return
+                result = self.acks.get(command)
+                raise LinkError(f"{what} refused by the autopilot (COMMAND_ACK result {result})")
+            if self._stop.is_set() or self.phase in (Phase.TAKEN_OVER, Phase.FAILED):
+                raise LinkError(f"{what}: interrupted")
+            if self.clock() > deadline:
+                raise LinkError(f"{what}: not confirmed within {self.options.command_timeout_s:g} s")
+
+    async def set_mode(self, mode: ModeRequest, custom_mode: int) -> None:
+        await self._command_confirmed(
+            f"mode {mode.name}",
+            lambda: self._set_mode_nowait(mode),
+            lambda: self.custom_mode == custom_mode or (mode is self.profile.offboard and self.custom_mode is not None and self.profile.is_offboard(self.custom_mode)),
+            mavlink2.MAV_CMD_DO_SET_MODE,
+        )
+
+    async def arm(self) -> None:
+        await self._command_confirmed(
+            "arming",
+            lambda: self._command(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1.0),
+            lambda: is_armed(self.base_mode),
+            mavlink2.MAV_CMD_COMPONENT_ARM_DISARM,
+        )
+
+    async def request_interval(self, message_id: int, rate_hz: float) -> None:
+        """SET_MESSAGE_INTERVAL; a refusal is reported, not fatal (the stream may already flow)."""
+        self._command(mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, float(message_id), 1e6 / rate_hz)
+
+    async def read_param(self, name: str) -> float:
+        t = self.link.target
+        deadline = self.clock() + self.options.command_timeout_s
+        self.params.pop(name, None)
+        while name not in self.params:
+            self.link.send(mavlink2.MAVLink_param_request_read_message(t.system, t.component, name.encode(), -1))
+            await self._wait_until(lambda: name in self.params, 0.5)
+            if self.clock() > deadline and name not in self.params:
+                raise LinkError(f"parameter {name}: no PARAM_VALUE within {self.options.command_timeout_s:g} s")
+        return self.params[name]
+
+    async def write_param(self, name: str, value: float, param_type: int) -> float:
+        t = self.link.target
+        bytewise = self.profile.autopilot is Autopilot.PX4
+        deadline = self.clock() + self.options.command_timeout_s
+        while True:
+            self.params.pop(name, None)
+            self.link.send(
+                mavlink2.MAVLink_param_set_message(t.system, t.component, name.encode(), param_value_encode(value, param_type, bytewise), param_type)
+            )
+            await self._wait_until(lambda: name in self.params, 0.5)
+            if name in self.params and self.params[name] == value:
+                return value
+            if self.clock() > deadline:
+                got = self.params.get(name)
+                raise LinkError(f"parameter {name}: set to {value:g} not confirmed (PARAM_VALUE {got})")
+
+    # ------------------------------------------------------------------ the flight
+    def request_stop(self, reason: str = "stop requested (Ctrl-C)") -> None:
+        """End following and hand back (SIGINT handler)."""
+        if self.phase in (Phase.FOLLOWING, Phase.ENGAGING, Phase.WAITING, Phase.TAKEOFF, Phase.PREFLIGHT):
+            self._end_reason = reason
+            self.phase = Phase.HANDING_BACK
+        self._stop.set()
+        self._changed.set()
+
+    def _finish(self, code: int, reason: str) -> None:
+        if self.result is None:
+            self.result = FlightResult(code, reason, self.activation_time_s, self.laps.laps, self.steps)
+        if self.phase is not Phase.TAKEN_OVER:
+            self.phase = Phase.DONE if code == EXIT_OK else Phase.FAILED
+        self._changed.set()
+
+    async def fly(self) -> FlightResult:
+        """Launch, follow, hand back. Returns how it ended (never raises LinkError)."""
+        try:
+            await self._launch()
+            await self._wait_until(lambda: self.phase not in (Phase.FOLLOWING, Phase.ENGAGING, Phase.WAITING), math.inf)
+            if self.phase is Phase.HANDING_BACK:
+                await self._hand_back()
+        except LinkError as exc:
+            if self.phase is not Phase.TAKEN_OVER:
+                self._print(f"error: {exc}")
+                await self._safe_exit()
+                self._finish(EXIT_LINK, str(exc))
+        if self.result is None:
+            self._finish(EXIT_LINK, "ended unexpectedly")
+        assert self.result is not None
+        return self.result
+
+    async def _launch(self) -> None:
+        opts = self.options
+        est = await self._first_state()
+        if opts.launch == "takeoff":
+            await self._takeoff(est)
+            self._stream_follow_before_active = True
+            self._activate()
+            return
+        self._stream_follow_before_active = True
+        if opts.launch == "airborne":
+            # proof of life for a second's worth of setpoints, then switch
+            await self._wait_until(lambda: self.pipeline.estimator.samples >= 2, opts.state_timeout_s * 4)
+            if not is_armed(self.base_mode):
+                raise LinkError("--airborne: the vehicle is not armed (is it flying?)")
+            self.phase = Phase.WAITING
+            await self._proof_of_life()
+            self._engage("activated (airborne)")
+            await self.set_mode(self.profile.offboard, self.profile.offboard_custom_mode)
+            if self.phase is Phase.ENGAGING:
+                self._activate()
+            return
+        # throw: stream the follower's setpoints while waiting; _on_state fires the trigger
+        self.phase = Phase.WAITING
+        self._print(f"waiting for a throw through {opts.height_m:g} m (Ctrl-C to abort)")
+        await self._wait_until(lambda: self.phase is not Phase.WAITING, math.inf)
+        if self.phase is Phase.ENGAGING:
+            await self._command_confirmed(
+                f"mode {self.profile.offboard.name}",
+                self._request_offboard_nowait,
+                lambda: self.phase is Phase.FOLLOWING,
+                mavlink2.MAV_CMD_DO_SET_MODE,
+            )
+
+    async def _first_state(self) -> StateEstimate:
+        ok = await self._wait_until(lambda: self.pipeline.estimator.latest is not None, max(3.0, self.options.command_timeout_s))
+        if not ok:
+            raise LinkError("no LOCAL_POSITION_NED / ODOMETRY from the vehicle (is its position estimate ready?)")
+        est = self.pipeline.estimator.latest
+        assert est is not None
+        return est
+
+    async def _proof_of_life(self) -> None:
+        """PX4 accepts OFFBOARD only after a recent setpoint stream; wait for a few to go out."""
+        start = self.sent_setpoints
+        need = max(5, int(0.2 * self.options.setpoint_rate_hz))
+        ok = await self._wait_until(lambda: self.sent_setpoints - start >= need, self.options.command_timeout_s)
+        if not ok:
+            raise LinkError("setpoint stream did not start (no fresh state samples)")
+
+    async def _takeoff(self, est: StateEstimate) -> None:
+        opts = self.options
+        self._takeoff_yaw = yaw_of(est.q_enu_flu) if est.q_enu_flu is not None else 0.0
+        target = np.array([est.position_enu_m[0], est.position_enu_m[1], opts.height_m])
+        if self.profile.autopilot is Autopilot.PX4:
+            # fly the take-off ourselves in OFFBOARD: position setpoints are the proof of life
+            self._takeoff_target = np.array([est.position_enu_m[0], est.position_enu_m[1], est.position_enu_m[2]])
+            self.phase = Phase.TAKEOFF
+            await self._proof_of_life()
+            await self.set_mode(self.profile.offboard, self.profile.offboard_custom_mode)
+            if not is_armed(self.base_mode):
+                await self.arm()
+            self._takeoff_target = target
+        else:
+            # ArduPilot: GUIDED, arm, MAV_CMD_NAV_TAKEOFF (it ignores position targets on the ground)
+            self.phase = Phase.TAKEOFF
+            await self.set_mode(self.profile.offboard, self.profile.offboard_custom_mode)
+            if not is_armed(self.base_mode):
+                await self.arm()
+            self._command(mavlink2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, opts.height_m)
+        self._print(f"taking off to {opts.height_m:g} m")
+
+        def settled() -> bool:
+            e = self.pipeline.estimator.latest
+            return e is not None and abs(e.position_enu_m[2] - opts.height_m) < 0.1 and float(np.linalg.norm(e.velocity_enu_m_s)) < 0.1
+
+        timeout = 10.0 + 5.0 * opts.height_m
+        if not await self._wait_until(lambda: settled() or self._stop.is_set(), timeout):
+            raise LinkError(f"take-off to {opts.height_m:g} m not reached within {timeout:g} s")
+        if self._stop.is_set():
+            raise LinkError("interrupted during take-off")
+        self._takeoff_target = None
+
+    async def _hand_back(self) -> None:
+        """Stream the hold setpoint while asking for the safe mode, then stop."""
+        mode, custom = (self.profile.land, self.profile.land_custom_mode) if self.options.end_action == "land" else (self.profile.hold, self.profile.hold_custom_mode)
+        self._print(f"{self._end_reason}; handing back in {mode.name}")
+        self._stop.clear()
+        try:
+            await self.set_mode(mode, custom)
+        finally:
+            self.phase = Phase.DONE
+            self._last_setpoint = None
+        self._finish(EXIT_OK, f"{self._end_reason}; handed back in {mode.name}")
+
+    async def _safe_exit(self) -> None:
+        """After a failure while we may be in control: ask for the hold mode once, stop sending."""
+        if self.phase in (Phase.FOLLOWING, Phase.ENGAGING, Phase.TAKEOFF, Phase.HANDING_BACK):
+            try:
+                self._set_mode_nowait(self.profile.land if self.options.end_action == "land" else self.profile.hold)
+            except LinkError:
+                pass
+        self.phase = Phase.FAILED
+        self._last_setpoint = None
+
+    # ------------------------------------------------------------------ periodic tasks (wall clock)
+    async def keepalive(self) -> None:
+        """Re-send the last setpoint when no fresh state came for one period; watch staleness."""
+        period = 1.0 / self.options.setpoint_rate_hz
+        while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
+            await asyncio.sleep(period)
+            now = self.clock()
+            if self.phase is Phase.FOLLOWING and now - self._last_fresh_wall > self.options.state_timeout_s:
+                self._print(f"error: no fresh state for {now - self._last_fresh_wall:.2f} s (state_timeout_s {self.options.state_timeout_s:g}); handing back")
+                await self._safe_exit()
+                self._finish(EXIT_LINK, "state went stale")
+                return
+            if self._last_setpoint is not None and now - self._last_send_wall >= period:
+                self._send(self._last_setpoint)
+
+    async def heartbeat(self) -> None:
+        while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
+            self.link.send_heartbeat()
+            await asyncio.sleep(1.0)
+
+    async def status_line(self) -> None:
+        tty = self.status_stream.isatty()
+        period = 0.2 if tty else 1.0
+        last = self.clock()
+        while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
+            await asyncio.sleep(period)
+            now = self.clock()
+            self.loop_rate_hz, self._rate_count, last = self._rate_count / max(now - last, 1e-9), 0, now
+            if self.options.status:
+                line = self.status_text()
+                self.status_stream.write(f"\r{line}\x1b[K" if tty else line + "\n")
+                self.status_stream.flush()
+        if self.options.status and tty:
+            self.status_stream.write("\n")
+
+    def status_text(self) -> str:
+        mode = self.profile.mode_name(self.custom_mode) if self.custom_mode is not None else "?"
+        armed = "armed" if is_armed(self.base_mode) else "disarmed"
+        head = f"[{self.phase.value}] {mode} {armed}"
+        step = self.last_step
+        if step is None or step.command is None:
+            return f"{head}  rate {self.loop_rate_hz:5.0f} Hz"
+        st = step.command.state
+        return (
+            f"{head}  η1 {st.eta1:7.2f} m  η2 {st.eta2:+5.2f} m/s  ξ1 {st.xi1:+6.3f} m  φ1 {st.phi1:+6.3f} m  "
+            f"e {step.command.cross_track_m:6.3f} m  laps {self.laps.laps:4.2f}  rate {self.loop_rate_hz:5.0f} Hz"
+        )
+
+    def _print(self, text: str) -> None:
+        if self.options.status:
+            self.status_stream.write(("\r\x1b[K" if self.status_stream.isatty() else "") + text + "\n")
+            self.status_stream.flush()

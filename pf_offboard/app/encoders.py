@@ -1,0 +1,275 @@
+"""Backends: encode a core :class:`Command` as a MAVLink setpoint. Encoding only, no decisions.
+
+One encoder per output mode (a level of the paper's Fig. 1 cascade):
+
+- ``acceleration``: SET_POSITION_TARGET_LOCAL_NED, MAV_FRAME_LOCAL_NED, acceleration + yaw +
+  yaw rate (position and velocity ignored, type_mask 0x03F);
+- ``attitude``: SET_ATTITUDE_TARGET quaternion + normalised thrust, with the body-rate
+  feed-forward the autopilot honours next to a quaternion (PX4: yaw rate only; ArduPilot: all);
+- ``rates``: the app's own attitude controller (P on the quaternion error, time constant τ, plus
+  the core's ω_ff feed-forward) → SET_ATTITUDE_TARGET body rates + thrust, quaternion ignored.
+
+Every value is checked finite before it leaves; a non-finite command is replaced by the safe hold
+setpoint (:meth:`Encoder.hold`) and reported through ``Encoded.replaced``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+from pymavlink.dialects.v20 import common as mavlink2
+
+from pf_offboard import frames
+from pf_offboard.app.estimator import StateEstimate
+from pf_offboard.app.profiles import Profile
+
+G_M_S2 = 9.81  # the paper's g; thrust normalisation divides by it
+
+# POSITION_TARGET_TYPEMASK bits
+_POS_IGNORE = 0x007
+_VEL_IGNORE = 0x038
+_ACC_IGNORE = 0x1C0
+_YAW_RATE_IGNORE = 0x800
+TYPE_MASK_ACCEL_YAW_YAWRATE = _POS_IGNORE | _VEL_IGNORE  # 0x03F
+TYPE_MASK_POSITION_YAW = _VEL_IGNORE | _ACC_IGNORE | _YAW_RATE_IGNORE  # 0x9F8
+# ATTITUDE_TARGET_TYPEMASK bits
+_ROLL_RATE_IGNORE = 1
+_PITCH_RATE_IGNORE = 2
+_YAW_RATE_IGNORE_ATT = 4
+ATTITUDE_IGNORE = 128
+MAV_FRAME_LOCAL_NED = 1
+
+_HOLD_DAMPING_1_S = 1.0  # velocity damping of the acceleration-mode hold (1/s)
+_HOLD_ACCEL_MAX_M_S2 = 3.0
+_THRUST_PROJECTION_FLOOR = 0.3  # rates mode: keep >= 30 % of the demand while the tilt is still far off
+
+
+class CommandLike(Protocol):
+    """The fields of ``pf_offboard.control.Command`` the encoders read."""
+
+    acceleration: Any
+    thrust: float
+    attitude: Any
+    body_rates: Any
+    yaw: float
+    yaw_rate: float
+
+
+@dataclass(frozen=True)
+class Encoded:
+    """One encoded setpoint. ``replaced`` names why the safe hold was sent instead ("" if not)."""
+
+    message: Any
+    thrust_norm: float
+    rates_frd_rad_s: tuple[float, float, float] | None
+    replaced: str = ""
+
+
+def thrust_normalised(thrust_m_s2: float, hover_thrust: float) -> float:
+    """Mass-normalised thrust (m/s²) → autopilot's 0..1 scale: T / g · hover_thrust, clipped.
+
+    NaN stays NaN (so the finiteness check catches it instead of it becoming zero thrust).
+    """
+    value = thrust_m_s2 / G_M_S2 * hover_thrust
+    return float(min(1.0, max(0.0, value))) if math.isfinite(value) else math.nan
+
+
+def yaw_of(q_enu_flu: NDArray[np.float64]) -> float:
+    """ENU yaw (rad) of a body FLU → world ENU attitude."""
+    w, x, y, z = q_enu_flu
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def level_attitude(yaw_enu_rad: float) -> NDArray[np.float64]:
+    """Level attitude (FLU → ENU) with the given ENU yaw."""
+    return np.array([math.cos(yaw_enu_rad / 2.0), 0.0, 0.0, math.sin(yaw_enu_rad / 2.0)])
+
+
+def _all_finite(values: Any) -> bool:
+    return bool(np.all(np.isfinite(np.asarray(values, dtype=float))))
+
+
+def attitude_rate_command(
+    q_des_enu_flu: NDArray[np.float64],
+    q_meas_enu_flu: NDArray[np.float64],
+    rates_ff_flu_rad_s: NDArray[np.float64],
+    time_constant_s: float,
+) -> NDArray[np.float64]:
+    """The rates-mode attitude controller (body FLU, rad/s).
+
+    ω = ω_ff + (2/τ) · sign(q_e,w) · q_e,xyz with q_e = q_meas⁻¹ ⊗ q_des: a first-order
+    reduction of the attitude error with time constant τ (small-angle), plus feed-forward.
+    """
+    q_conj = np.array([q_meas_enu_flu[0], -q_meas_enu_flu[1], -q_meas_enu_flu[2], -q_meas_enu_flu[3]])
+    q_err = frames.quat_multiply(q_conj, q_des_enu_flu)
+    sign = 1.0 if q_err[0] >= 0.0 else -1.0  # shortest way round
+    return np.asarray(rates_ff_flu_rad_s, dtype=float) + (2.0 / time_constant_s) * sign * q_err[1:]
+
+
+def body_z(q_enu_flu: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Body z axis (thrust direction) in world ENU."""
+    w, x, y, z = q_enu_flu
+    return np.array([2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)])
+
+
+class Encoder:
+    """Encode commands for one output mode and autopilot profile.
+
+    ``hover_thrust`` is the autopilot's normalised hover thrust (0..1) used to scale the
+    thrust of attitude / rates setpoints; ``time_constant_s`` is τ of the rates-mode attitude
+    controller. Pure: same inputs, same message.
+    """
+
+    def __init__(
+        self,
+        output_mode: str,
+        profile: Profile,
+        target_system: int,
+        target_component: int,
+        hover_thrust: float = 0.5,
+        time_constant_s: float = 0.1,
+    ) -> None:
+        if output_mode not in ("acceleration", "attitude", "rates"):
+            raise ValueError(f"unknown output mode {output_mode!r}")
+        if not (0.0 < hover_thrust < 1.0):
+            raise ValueError(f"hover_thrust must be in (0, 1), got {hover_thrust}")
+        if not time_constant_s > 0.0:
+            raise ValueError(f"time_constant_s must be positive, got {time_constant_s}")
+        self.output_mode = output_mode
+        self.profile = profile
+        self.target_system = target_system
+        self.target_component = target_component
+        self.hover_thrust = hover_thrust
+        self.time_constant_s = time_constant_s
+
+    # ------------------------------------------------------------------ path-following setpoints
+    def encode(self, cmd: CommandLike, est: StateEstimate, time_boot_ms: int) -> Encoded:
+        """The setpoint for a core command; the safe hold if anything is not finite."""
+        fields = (cmd.acceleration, cmd.thrust, cmd.attitude, cmd.body_rates, cmd.yaw, cmd.yaw_rate)
+        if not all(_all_finite(f) for f in fields):
+            # any non-finite output means the core failed this step: trust none of it
+            return self._replace(est, time_boot_ms, "non-finite value in command")
+        if self.output_mode == "rates" and est.q_enu_flu is None:
+            return self._replace(est, time_boot_ms, "no attitude estimate yet (rates mode needs ATTITUDE_QUATERNION)")
+        try:
+            encoded = self._encode(cmd, est, time_boot_ms)
+        except (ValueError, FloatingPointError) as exc:  # frames reject non-finite quaternions
+            return self._replace(est, time_boot_ms, f"command not encodable: {exc}")
+        if not self._finite_message(encoded.message):
+            return self._replace(est, time_boot_ms, "non-finite value in command")
+        return encoded
+
+    def _encode(self, cmd: CommandLike, est: StateEstimate, time_boot_ms: int) -> Encoded:
+        if self.output_mode == "acceleration":
+            accel_ned = frames.enu_to_ned(cmd.acceleration)
+            msg = mavlink2.MAVLink_set_position_target_local_ned_message(
+                time_boot_ms, self.target_system, self.target_component, MAV_FRAME_LOCAL_NED,
+                TYPE_MASK_ACCEL_YAW_YAWRATE, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                float(accel_ned[0]), float(accel_ned[1]), float(accel_ned[2]),
+                frames.yaw_enu_to_ned(float(cmd.yaw)), frames.yaw_rate_enu_to_ned(float(cmd.yaw_rate)),
+            )  # fmt: skip
+            return Encoded(msg, math.nan, None)
+        q_des = np.asarray(cmd.attitude, dtype=float)
+        if self.output_mode == "attitude":
+            rates_frd = frames.flu_to_frd(cmd.body_rates)
+            honoured = self.profile.attitude_rates_ff
+            mask = 0
+            for bit, used in zip((_ROLL_RATE_IGNORE, _PITCH_RATE_IGNORE, _YAW_RATE_IGNORE_ATT), honoured):
+                mask |= 0 if used else bit
+            sent = tuple(float(r) if used else 0.0 for r, used in zip(rates_frd, honoured))
+            thrust = thrust_normalised(float(cmd.thrust), self.hover_thrust)
+            return Encoded(self._attitude_msg(time_boot_ms, mask, q_des, sent, thrust), thrust, sent)  # type: ignore[arg-type]
+        # rates: our own attitude loop closes on the measured attitude
+        assert est.q_enu_flu is not None
+        rates_flu = attitude_rate_command(q_des, est.q_enu_flu, np.asarray(cmd.body_rates, dtype=float), self.time_constant_s)
+        # thrust along the current body z: the part of the demand the vehicle can produce now
+        projection = float(np.dot(body_z(q_des), body_z(est.q_enu_flu)))
+        thrust = thrust_normalised(float(cmd.thrust) * max(projection, _THRUST_PROJECTION_FLOOR), self.hover_thrust)
+        rates_frd = frames.flu_to_frd(rates_flu)
+        sent = (float(rates_frd[0]), float(rates_frd[1]), float(rates_frd[2]))
+        return Encoded(self._attitude_msg(time_boot_ms, ATTITUDE_IGNORE, np.array([1.0, 0, 0, 0]), sent, thrust, ned=True), thrust, sent)
+
+    def _attitude_msg(
+        self,
+        time_boot_ms: int,
+        mask: int,
+        q_enu_flu: NDArray[np.float64],
+        rates_frd: tuple[float, float, float],
+        thrust: float,
+        ned: bool = False,
+    ) -> Any:
+        q_ned = q_enu_flu if ned else frames.quat_enu_flu_to_ned_frd(q_enu_flu)
+        return mavlink2.MAVLink_set_attitude_target_message(
+            time_boot_ms, self.target_system, self.target_component, mask,
+            [float(v) for v in q_ned], rates_frd[0], rates_frd[1], rates_frd[2], thrust,
+        )  # fmt: skip
+
+    # ------------------------------------------------------------------ other setpoints
+    def hold(self, est: StateEstimate, time_boot_ms: int, reason: str = "") -> Encoded:
+        """Safe hold in this output mode: brake to a hover at the current heading.
+
+        acceleration: a = −k·v (k = 1/s, |a| ≤ 3 m/s²), current yaw, zero yaw rate;
+        attitude: level at the current yaw, hover thrust, no feed-forward;
+        rates: our attitude loop towards level, hover thrust.
+        """
+        yaw = yaw_of(est.q_enu_flu) if est.q_enu_flu is not None else 0.0
+        if self.output_mode == "acceleration":
+            accel = -_HOLD_DAMPING_1_S * np.asarray(est.velocity_enu_m_s, dtype=float)
+            norm = float(np.linalg.norm(accel))
+            if not math.isfinite(norm):
+                accel = np.zeros(3)
+            elif norm > _HOLD_ACCEL_MAX_M_S2:
+                accel *= _HOLD_ACCEL_MAX_M_S2 / norm
+            accel_ned = frames.enu_to_ned(accel)
+            msg = mavlink2.MAVLink_set_position_target_local_ned_message(
+                time_boot_ms, self.target_system, self.target_component, MAV_FRAME_LOCAL_NED,
+                TYPE_MASK_ACCEL_YAW_YAWRATE, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                float(accel_ned[0]), float(accel_ned[1]), float(accel_ned[2]), frames.yaw_enu_to_ned(yaw), 0.0,
+            )  # fmt: skip
+            return Encoded(msg, math.nan, None, reason or "hold")
+        level = level_attitude(yaw)
+        if self.output_mode == "attitude" or est.q_enu_flu is None:
+            mask = _ROLL_RATE_IGNORE | _PITCH_RATE_IGNORE | _YAW_RATE_IGNORE_ATT
+            return Encoded(self._attitude_msg(time_boot_ms, mask, level, (0.0, 0.0, 0.0), self.hover_thrust), self.hover_thrust, None, reason or "hold")
+        rates_frd = frames.flu_to_frd(attitude_rate_command(level, est.q_enu_flu, np.zeros(3), self.time_constant_s))
+        sent = (float(rates_frd[0]), float(rates_frd[1]), float(rates_frd[2]))
+        msg = self._attitude_msg(time_boot_ms, ATTITUDE_IGNORE, np.array([1.0, 0, 0, 0]), sent, self.hover_thrust, ned=True)
+        return Encoded(msg, self.hover_thrust, sent, reason or "hold")
+
+    def idle(self, est: StateEstimate, time_boot_ms: int) -> Encoded:
+        """Zero-thrust, level attitude setpoint (proof of life while waiting for a throw)."""
+        yaw = yaw_of(est.q_enu_flu) if est.q_enu_flu is not None else 0.0
+        mask = _ROLL_RATE_IGNORE | _PITCH_RATE_IGNORE | _YAW_RATE_IGNORE_ATT
+        return Encoded(self._attitude_msg(time_boot_ms, mask, level_attitude(yaw), (0.0, 0.0, 0.0), 0.0), 0.0, None, "idle")
+
+    def _replace(self, est: StateEstimate, time_boot_ms: int, reason: str) -> Encoded:
+        return self.hold(est, time_boot_ms, reason)
+
+    @staticmethod
+    def _finite_message(msg: Any) -> bool:
+        for name in msg.get_fieldnames():
+            value = getattr(msg, name)
+            if isinstance(value, float) and not math.isfinite(value):
+                return False
+            if isinstance(value, (list, tuple)) and not _all_finite(value):
+                return False
+        return True
+
+
+def position_setpoint(
+    target_system: int,
+    target_component: int,
+    time_boot_ms: int,
+    position_enu_m: NDArray[np.float64],
+    yaw_enu_rad: float,
+) -> Any:
+    """Position + yaw setpoint (used to fly a take-off in OFFBOARD on PX4)."""
+    p = frames.enu_to_ned(position_enu_m)
+    return mavlink2.MAVLink_set_position_target_local_ned_message(
+        time_boot_ms, target_system, target_component, MAV_FRAME_LOCAL_NED, TYPE_MASK_POSITION_YAW,
+        float(p[0]), float(p[1]), float(p[2]), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, frames.yaw_enu_to_ned(yaw_enu_rad), 0.0,
+    )  # fmt: skip

@@ -1,0 +1,253 @@
+"""``pf-offboard fly``: follow a path on a PX4 / ArduPilot vehicle over MAVLink.
+
+One asyncio loop: the link reader (an event-loop callback on the socket), and one TaskGroup
+supervising the flight itself, the keep-alive / watchdog, our HEARTBEAT and the status line.
+See docs/app.md for the behaviour in full.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import datetime as _dt
+import math
+import signal
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from pf_offboard.errors import InputError, LinkError
+
+LAUNCHES = ("takeoff", "airborne", "throw")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--connect", required=True, metavar="ENDPOINT",
+                        help="udpin:HOST:PORT | udpout:HOST:PORT | tcp:HOST:PORT | serial:DEVICE:BAUD "
+                             "(PX4 SITL: udpin:0.0.0.0:14540; ArduPilot SITL: tcp:127.0.0.1:5760)")  # fmt: skip
+    parser.add_argument("--config", required=True, metavar="YAML", help="path, speed, gains, limits and flight: settings")
+    launch = parser.add_mutually_exclusive_group(required=True)
+    launch.add_argument("--takeoff", type=float, metavar="H", help="arm, take off to H metres, then follow")
+    launch.add_argument("--airborne", action="store_true", help="the vehicle is flying: switch to OFFBOARD/GUIDED and follow")
+    launch.add_argument("--throw", type=float, metavar="H", help="activate when a thrown vehicle crosses H metres")
+    parser.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: flight.output_mode)")
+    parser.add_argument("--autopilot", choices=("auto", "px4", "ardupilot"), default="auto", help="default: from HEARTBEAT")
+    parser.add_argument("--laps", type=float, help="end after N laps")
+    parser.add_argument("--duration", type=float, metavar="S", help="end after S seconds of following (vehicle time)")
+    parser.add_argument("--end-action", choices=("hold", "land"), help="hand-back mode (default: flight.end_action)")
+    parser.add_argument("--target-system", type=int, help="vehicle system id (default: first autopilot heard)")
+    parser.add_argument("--heartbeat-timeout", type=float, default=10.0, metavar="S", help="give up without a HEARTBEAT (s)")
+    parser.add_argument("--state-source", choices=("local_position", "odometry"), default="local_position",
+                        help="position/velocity telemetry to follow with")  # fmt: skip
+    parser.add_argument("--set-guid-options", action="store_true",
+                        help="ArduPilot: set the GUID_OPTIONS bits the output mode needs instead of refusing")  # fmt: skip
+    parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/<UTC timestamp>/")
+    parser.add_argument("--quiet", action="store_true", help="no status line")
+
+
+@dataclass(frozen=True)
+class FlightSettings:
+    """The ``flight:`` section of a config with the command-line overrides applied."""
+
+    output_mode: str
+    setpoint_rate_hz: float
+    state_timeout_s: float
+    hover_thrust: float | None
+    end_action: str
+    attitude_time_constant_s: float
+
+
+def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
+    """Read ``config.flight`` (tolerating a config without one) and apply flags; validate."""
+    flight = getattr(config, "flight", None)
+
+    def get(name: str, default: Any) -> Any:
+        value = getattr(flight, name, None) if flight is not None else None
+        return default if value is None else value
+
+    s = FlightSettings(
+        output_mode=args.output or get("output_mode", "acceleration"),
+        setpoint_rate_hz=float(get("setpoint_rate_hz", 50.0)),
+        state_timeout_s=float(get("state_timeout_s", 0.5)),
+        hover_thrust=get("hover_thrust", None),
+        end_action=args.end_action or get("end_action", "hold"),
+        attitude_time_constant_s=float(get("attitude_time_constant_s", 0.1)),
+    )
+    if s.output_mode not in ("acceleration", "attitude", "rates"):
+        raise InputError("flight.output_mode", f"must be acceleration, attitude or rates, got {s.output_mode!r}")
+    if not (math.isfinite(s.setpoint_rate_hz) and 2.0 < s.setpoint_rate_hz <= 1000.0):
+        raise InputError("flight.setpoint_rate_hz", f"must be in (2, 1000] Hz (PX4 needs > 2 Hz), got {s.setpoint_rate_hz}")
+    if not (math.isfinite(s.state_timeout_s) and 0.0 < s.state_timeout_s <= 5.0):
+        raise InputError("flight.state_timeout_s", f"must be in (0, 5] s, got {s.state_timeout_s}")
+    if s.hover_thrust is not None and not (0.05 <= float(s.hover_thrust) <= 0.95):
+        raise InputError("flight.hover_thrust", f"must be in [0.05, 0.95] (normalised) or omitted, got {s.hover_thrust}")
+    if s.end_action not in ("hold", "land"):
+        raise InputError("flight.end_action", f"must be hold or land, got {s.end_action!r}")
+    if not (math.isfinite(s.attitude_time_constant_s) and 0.01 <= s.attitude_time_constant_s <= 2.0):
+        raise InputError("flight.attitude_time_constant_s", f"must be in [0.01, 2] s, got {s.attitude_time_constant_s}")
+    return s
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    for flag, value in (("--takeoff", args.takeoff), ("--throw", args.throw)):
+        if value is not None and not (math.isfinite(value) and 0.3 <= value <= 100.0):
+            raise InputError(flag, f"height must be in [0.3, 100] m, got {value}")
+    if args.laps is not None and not (math.isfinite(args.laps) and args.laps > 0):
+        raise InputError("--laps", f"must be > 0, got {args.laps}")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise InputError("--duration", f"must be > 0 s, got {args.duration}")
+    if not (math.isfinite(args.heartbeat_timeout) and args.heartbeat_timeout > 0):
+        raise InputError("--heartbeat-timeout", f"must be > 0 s, got {args.heartbeat_timeout}")
+
+
+def default_log_dir() -> Path:
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+    return Path("flights") / stamp
+
+
+@dataclass
+class FlyOutcome:
+    """What ``fly`` hands back to callers (``demo``, tests)."""
+
+    exit_code: int
+    reason: str
+    log_dir: Path | None
+    records: list[Any]
+    summary: Any | None
+    activation_time_s: float | None
+
+
+def run(args: argparse.Namespace) -> int:
+    outcome = fly(args)
+    return outcome.exit_code
+
+
+def fly(args: argparse.Namespace, status_stream: TextIO | None = None) -> FlyOutcome:
+    """Parse, validate and fly; prints the summary and the log path. Never hangs on a dead link."""
+    from pf_offboard.app.link import parse_endpoint
+    from pf_offboard.config import load_config
+
+    endpoint = parse_endpoint(args.connect)  # InputError before anything is opened
+    _check_args(args)
+    config = load_config(args.config)
+    settings = flight_settings(config, args)
+    stream = status_stream if status_stream is not None else sys.stderr
+    try:
+        return asyncio.run(_fly(args, endpoint, config, settings, stream))
+    except LinkError as exc:
+        print(f"pf-offboard fly: link error: {exc}", file=stream)
+        return FlyOutcome(3, str(exc), None, [], None, None)
+
+
+async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: FlightSettings, stream: TextIO) -> FlyOutcome:
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    from pf_offboard.app.bridge import Bridge, BridgeOptions, EndSpec
+    from pf_offboard.app.encoders import Encoder
+    from pf_offboard.app.estimator import Estimator
+    from pf_offboard.app.link import Link
+    from pf_offboard.app.pipeline import Pipeline
+    from pf_offboard.app.profiles import Autopilot, select_profile
+    from pf_offboard.control import PathFollower
+    from pf_offboard.logs.flightlog import FlightLog
+    from pf_offboard.logs.summary import summarize
+
+    follower = PathFollower.from_config(config)
+    link = Link.open(endpoint)
+    log: FlightLog | None = None
+    try:
+        target = await link.wait_heartbeat(args.heartbeat_timeout, args.target_system)
+        profile = select_profile(args.autopilot, target.autopilot)
+        link.set_source_system(target.system)
+        log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
+        log = FlightLog.open(log_dir, config_path=args.config)
+        flight_log = log
+        link.on_received = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
+        link.on_sent = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
+
+        launch = "takeoff" if args.takeoff is not None else "throw" if args.throw is not None else "airborne"
+        height = args.takeoff if args.takeoff is not None else args.throw if args.throw is not None else math.nan
+        path = follower.path
+        options = BridgeOptions(
+            launch=launch,
+            height_m=height,
+            end=EndSpec(laps=args.laps, duration_s=args.duration),
+            end_action=settings.end_action,
+            setpoint_rate_hz=settings.setpoint_rate_hz,
+            state_timeout_s=settings.state_timeout_s,
+            status=not args.quiet,
+        )
+        records: list[Any] = []
+        pipeline = Pipeline(follower, Encoder(settings.output_mode, profile, target.system, target.component), Estimator(args.state_source))
+        bridge = Bridge(
+            link, profile, pipeline, options, path.length_m, path.closed, path.lam_max,
+            on_step=lambda step: (records.append(step.record), flight_log.step(step.record)),
+            status_stream=stream,
+        )  # fmt: skip
+        link.start_reading(bridge.on_message)
+
+        # telemetry at the rates we need: state at the setpoint rate (a fresh sample drives each
+        # setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s where honoured.
+        state_id = mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED if args.state_source == "local_position" else mavlink2.MAVLINK_MSG_ID_ODOMETRY
+        for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
+            await bridge.request_interval(msg_id, rate)
+
+        hover = settings.hover_thrust
+        if hover is None and settings.output_mode != "acceleration":
+            hover = await bridge.read_param(profile.hover_thrust_param)
+            if not 0.05 <= hover <= 0.95:
+                raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
+        pipeline.encoder = Encoder(
+            settings.output_mode, profile, target.system, target.component,
+            hover_thrust=float(hover) if hover is not None else 0.5, time_constant_s=settings.attitude_time_constant_s,
+        )  # fmt: skip
+        if profile.autopilot is Autopilot.ARDUPILOT:
+            await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
+
+        loop = asyncio.get_running_loop()
+        loop.add_signal_handler(signal.SIGINT, bridge.request_stop)
+        try:
+            async with asyncio.TaskGroup() as tg:
+                flight = tg.create_task(bridge.fly())
+                tg.create_task(bridge.keepalive())
+                tg.create_task(bridge.heartbeat())
+                tg.create_task(bridge.status_line())
+                result = await flight
+        finally:
+            loop.remove_signal_handler(signal.SIGINT)
+        summary = summarize(records) if records else None
+        _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
+        return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s)
+    finally:
+        link.close()
+        if log is not None:
+            log.close()
+
+
+async def _check_guid_options(bridge: Any, required: int, allow_set: bool, output_mode: str) -> None:
+    """ArduPilot: make sure GUID_OPTIONS has the bits the output mode needs, or refuse."""
+    value = int(await bridge.read_param("GUID_OPTIONS"))
+    if value & required == required:
+        return
+    missing = required & ~value
+    if not allow_set:
+        raise InputError(
+            "--set-guid-options",
+            f"ArduPilot GUID_OPTIONS={value} lacks bit(s) {missing} needed by --output {output_mode} "
+            "(8: thrust as thrust; 16|32: no position/velocity correction); set them on the vehicle or pass --set-guid-options",
+        )
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    await bridge.write_param("GUID_OPTIONS", float(value | required), mavlink2.MAV_PARAM_TYPE_INT32)
+
+
+def _report(stream: TextIO, reason: str, code: int, summary: Any, log_dir: Path, bridge: Any) -> None:
+    print(f"pf-offboard fly: {reason} (exit {code})", file=stream)
+    if bridge.pipeline.replaced_steps:
+        print(f"  safe hold sent instead of a non-finite command {bridge.pipeline.replaced_steps} times", file=stream)
+    if summary is not None:
+        for line in summary.lines():
+            print("  " + line, file=stream)
+    print(f"logs: {log_dir}", file=stream)

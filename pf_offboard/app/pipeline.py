@@ -1,0 +1,141 @@
+"""The pure heart of ``fly``: MAVLink telemetry in → (setpoint message, StepRecord) out.
+
+No sockets, no clocks: the setpoint is a deterministic function of the messages fed in (their
+timestamps included), so ``replay`` re-feeding a flight's recorded telemetry reproduces the
+setpoints that flew. ``fly``, ``sim`` and ``replay`` all use this class.
+
+    pipe = Pipeline(follower, encoder)
+    for msg in telemetry:
+        pipe.on_message(msg)
+        out = pipe.step()          # None unless a fresh state sample arrived since the last step
+        if out: send(out.setpoint); log(out.record)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pf_offboard.app.encoders import Encoded, Encoder
+from pf_offboard.app.estimator import Estimator, StateEstimate
+from pf_offboard.logs.steplog import StepRecord
+
+_NAN3 = (math.nan, math.nan, math.nan)
+_NAN4 = (math.nan, math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One controller step: the message to send, its log record, the inputs it came from."""
+
+    setpoint: Any  # pymavlink message (SET_POSITION_TARGET_LOCAL_NED / SET_ATTITUDE_TARGET)
+    record: StepRecord
+    command: Any | None  # pf_offboard.control.Command, None when the core failed
+    estimate: StateEstimate
+    encoded: Encoded
+
+
+def time_boot_ms(est: StateEstimate) -> int:
+    """Setpoint timestamp from the state sample's own (autopilot) clock."""
+    return int(round(est.time_s * 1000.0)) & 0xFFFFFFFF
+
+
+class Pipeline:
+    """Estimator → core → encoder, stepped once per fresh state sample.
+
+    ``follower`` is a :class:`pf_offboard.control.PathFollower` (anything with
+    ``update(position_enu_m, velocity_enu_m_s) -> Command`` and ``reset()``).
+    """
+
+    def __init__(self, follower: Any, encoder: Encoder, estimator: Estimator | None = None) -> None:
+        self.follower = follower
+        self.encoder = encoder
+        self.estimator = estimator if estimator is not None else Estimator()
+        self._stepped_sample = 0
+        self.replaced_steps = 0  # steps where the safe hold was sent instead of the command
+        speed = getattr(follower, "speed", math.nan)
+        self.speed_ref_m_s = float(speed) if isinstance(speed, (int, float)) else math.nan
+
+    def on_message(self, msg: Any) -> bool:
+        """Feed one received message; True if it brought a fresh state sample."""
+        return self.estimator.on_message(msg)
+
+    @property
+    def fresh(self) -> bool:
+        est = self.estimator.latest
+        return est is not None and est.sample != self._stepped_sample
+
+    def mark_consumed(self) -> None:
+        """Forget the fresh sample without stepping the controller (used before activation)."""
+        est = self.estimator.latest
+        if est is not None:
+            self._stepped_sample = est.sample
+
+    def step(self, mode: str = "following", active: bool = True, event: str = "") -> Step | None:
+        """Run the controller on the latest state if it is fresh; else None."""
+        est = self.estimator.latest
+        if est is None or est.sample == self._stepped_sample:
+            return None
+        self._stepped_sample = est.sample
+        events = [event] if event else []
+        if self.estimator.reset_pending:
+            self.estimator.reset_pending = False
+            self.follower.reset()  # the position may have jumped: redo the global projection
+            events.append("estimator_reset")
+        stamp = time_boot_ms(est)
+        try:
+            cmd = self.follower.update(est.position_enu_m, est.velocity_enu_m_s)
+        except (ArithmeticError, ValueError) as exc:  # never let a core failure become silence
+            cmd = None
+            encoded = self.encoder.hold(est, stamp, f"controller failed: {exc}")
+        else:
+            encoded = self.encoder.encode(cmd, est, stamp)
+        if encoded.replaced:
+            self.replaced_steps += 1
+            events.append(f"hold: {encoded.replaced}")
+        record = self._record(est, cmd, mode, active, ";".join(events))
+        return Step(encoded.message, record, cmd, est, encoded)
+
+    def _record(self, est: StateEstimate, cmd: Any | None, mode: str, active: bool, event: str) -> StepRecord:
+        if cmd is None:  # the core failed: log the state, NaN commands (the hold went out)
+            nan = math.nan
+            return StepRecord(
+                time_s=est.time_s, mode=mode, active=active, position_enu_m=est.position_enu_m,
+                velocity_enu_m_s=est.velocity_enu_m_s, lam=nan, eta1_m=nan, eta2_m_s=nan, xi1_m=nan,
+                xi2_m_s=nan, phi1_m=nan, phi2_m_s=nan, cross_track_m=nan, speed_ref_m_s=self.speed_ref_m_s,
+                accel_cmd_enu_m_s2=_NAN3, thrust_cmd_m_s2=nan, q_cmd_enu_flu=_NAN4, rates_cmd_flu_rad_s=_NAN3,
+                yaw_cmd_rad=nan, yaw_rate_cmd_rad_s=nan, sat_tangential=False, sat_transversal=False,
+                sat_tilt=False, sat_thrust=False, sat_approach_speed=False, event=event,
+            )  # fmt: skip
+        st, sat = cmd.state, cmd.saturation
+        return StepRecord(
+            time_s=est.time_s,
+            mode=mode,
+            active=active,
+            position_enu_m=est.position_enu_m,
+            velocity_enu_m_s=est.velocity_enu_m_s,
+            lam=float(cmd.lam),
+            eta1_m=float(st.eta1),
+            eta2_m_s=float(st.eta2),
+            xi1_m=float(st.xi1),
+            xi2_m_s=float(st.xi2),
+            phi1_m=float(st.phi1),
+            phi2_m_s=float(st.phi2),
+            cross_track_m=float(cmd.cross_track_m),
+            speed_ref_m_s=self.speed_ref_m_s,
+            accel_cmd_enu_m_s2=np.asarray(cmd.acceleration, dtype=float),
+            thrust_cmd_m_s2=float(cmd.thrust),
+            q_cmd_enu_flu=np.asarray(cmd.attitude, dtype=float),
+            rates_cmd_flu_rad_s=np.asarray(cmd.body_rates, dtype=float),
+            yaw_cmd_rad=float(cmd.yaw),
+            yaw_rate_cmd_rad_s=float(cmd.yaw_rate),
+            sat_tangential=bool(sat.tangential),
+            sat_transversal=bool(sat.transversal),
+            sat_tilt=bool(sat.tilt),
+            sat_thrust=bool(sat.thrust),
+            sat_approach_speed=bool(sat.approach_speed),
+            event=event,
+        )

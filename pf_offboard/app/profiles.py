@@ -1,0 +1,159 @@
+"""Autopilot profiles: what PX4 and ArduPilot Copter call things and what they honour.
+
+Pure data and pure functions (no I/O). The facts come from the autopilots' source, collected in
+``shared/notes/autopilot-facts.md``; the choices made from them are documented in ``docs/app.md``.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+from pf_offboard.errors import InputError
+
+# MAVLink enum values used here (common.xml); kept local so this module imports nothing heavy.
+MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+MAV_AUTOPILOT_PX4 = 12
+MAV_AUTOPILOT_INVALID = 8
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
+
+OUTPUT_MODES: tuple[str, ...] = ("acceleration", "attitude", "rates")
+
+
+class Autopilot(enum.Enum):
+    """The autopilot family on the other end of the link."""
+
+    PX4 = "px4"
+    ARDUPILOT = "ardupilot"
+
+
+@dataclass(frozen=True)
+class ModeRequest:
+    """Arguments of MAV_CMD_DO_SET_MODE for one flight mode (param1 = base mode flag)."""
+
+    name: str
+    param2: float  # PX4 main mode / ArduPilot custom mode number
+    param3: float  # PX4 sub mode; 0 for ArduPilot
+
+
+def px4_custom_mode(main: int, sub: int = 0) -> int:
+    """PX4 HEARTBEAT custom_mode: ``{uint16 reserved; uint8 main_mode; uint8 sub_mode}``."""
+    return (main << 16) | (sub << 24)
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Everything the app needs to know about one autopilot family.
+
+    ``offboard`` is the mode the app flies in (PX4 OFFBOARD, ArduPilot GUIDED); ``hold`` and
+    ``land`` are the hand-back modes. ``custom_mode`` values are what HEARTBEAT reports.
+    """
+
+    autopilot: Autopilot
+    offboard: ModeRequest
+    offboard_custom_mode: int
+    hold: ModeRequest
+    hold_custom_mode: int
+    land: ModeRequest
+    land_custom_mode: int
+    hover_thrust_param: str
+    # body-rate feed-forward honoured next to an attitude quaternion: PX4 uses only the yaw rate,
+    # ArduPilot uses all three (it advances its target attitude with them).
+    attitude_rates_ff: tuple[bool, bool, bool]
+
+    @property
+    def name(self) -> str:
+        return self.autopilot.value
+
+    def is_offboard(self, custom_mode: int) -> bool:
+        """True when a HEARTBEAT custom_mode says the vehicle is in our mode."""
+        if self.autopilot is Autopilot.PX4:
+            # compare main mode only; PX4 leaves sub mode 0 in OFFBOARD.
+            return (custom_mode >> 16) & 0xFF == 6
+        return custom_mode == self.offboard_custom_mode
+
+    def mode_name(self, custom_mode: int) -> str:
+        """Human-readable mode for the status line."""
+        if self.autopilot is Autopilot.PX4:
+            main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+            mains = {1: "MANUAL", 2: "ALTCTL", 3: "POSCTL", 4: "AUTO", 5: "ACRO", 6: "OFFBOARD", 7: "STABILIZED"}
+            subs = {2: "TAKEOFF", 3: "LOITER", 4: "MISSION", 5: "RTL", 6: "LAND"}
+            text = mains.get(main, f"MODE{main}")
+            return f"{text}.{subs.get(sub, sub)}" if main == 4 else text
+        names = {0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER", 6: "RTL", 9: "LAND", 16: "POSHOLD", 17: "BRAKE", 18: "THROW"}
+        return names.get(custom_mode, f"MODE{custom_mode}")
+
+    def required_guid_options(self, output_mode: str) -> int:
+        """GUID_OPTIONS bits an output mode needs (ArduPilot only; 0 for PX4).
+
+        - attitude / rates: bit 3 (8), "thrust as thrust"; without it ArduPilot reads the
+          thrust field as a climb-rate demand and would fly a misread command.
+        - acceleration: bits 4 and 5 (16 | 32), "do not stabilise position / velocity XY";
+          otherwise ArduPilot integrates our accelerations into its own velocity/position target
+          and corrects towards it, a second outer loop fighting the path follower.
+        """
+        if self.autopilot is not Autopilot.ARDUPILOT:
+            return 0
+        return 8 if output_mode in ("attitude", "rates") else 16 | 32
+
+
+PX4 = Profile(
+    autopilot=Autopilot.PX4,
+    offboard=ModeRequest("OFFBOARD", 6, 0),
+    offboard_custom_mode=px4_custom_mode(6),
+    hold=ModeRequest("AUTO.LOITER", 4, 3),
+    hold_custom_mode=px4_custom_mode(4, 3),
+    land=ModeRequest("AUTO.LAND", 4, 6),
+    land_custom_mode=px4_custom_mode(4, 6),
+    hover_thrust_param="MPC_THR_HOVER",
+    attitude_rates_ff=(False, False, True),
+)
+
+ARDUPILOT = Profile(
+    autopilot=Autopilot.ARDUPILOT,
+    offboard=ModeRequest("GUIDED", 4, 0),
+    offboard_custom_mode=4,
+    hold=ModeRequest("LOITER", 5, 0),
+    hold_custom_mode=5,
+    land=ModeRequest("LAND", 9, 0),
+    land_custom_mode=9,
+    hover_thrust_param="MOT_THST_HOVER",
+    attitude_rates_ff=(True, True, True),
+)
+
+PROFILES: dict[str, Profile] = {"px4": PX4, "ardupilot": ARDUPILOT}
+
+
+def profile_from_heartbeat(autopilot: int) -> Profile:
+    """Profile for a HEARTBEAT ``autopilot`` field; anything else is an error naming the value."""
+    if autopilot == MAV_AUTOPILOT_PX4:
+        return PX4
+    if autopilot == MAV_AUTOPILOT_ARDUPILOTMEGA:
+        return ARDUPILOT
+    raise InputError(
+        "--autopilot",
+        f"HEARTBEAT autopilot={autopilot} is neither PX4 (12) nor ArduPilot (3); pass --autopilot px4|ardupilot",
+    )
+
+
+def select_profile(flag: str | None, heartbeat_autopilot: int) -> Profile:
+    """The ``--autopilot`` flag if given (``auto`` or None means detect from HEARTBEAT)."""
+    if flag in (None, "auto"):
+        return profile_from_heartbeat(heartbeat_autopilot)
+    try:
+        return PROFILES[flag]
+    except KeyError:
+        raise InputError("--autopilot", f"unknown autopilot {flag!r}; use auto, px4 or ardupilot") from None
+
+
+def check_output_mode(output_mode: str) -> str:
+    """Validate an output mode name."""
+    if output_mode not in OUTPUT_MODES:
+        raise InputError("--output", f"unknown output mode {output_mode!r}; use one of {', '.join(OUTPUT_MODES)}")
+    return output_mode
+
+
+def is_armed(base_mode: int) -> bool:
+    """Armed flag of a HEARTBEAT base_mode (bit 128, same on both autopilots)."""
+    return bool(base_mode & MAV_MODE_FLAG_SAFETY_ARMED)

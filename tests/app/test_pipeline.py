@@ -1,0 +1,103 @@
+"""Pipeline: pure and deterministic; one step per fresh sample; resets; core failures become a hold."""
+
+import math
+
+import numpy as np
+import pytest
+
+from pf_offboard.app.encoders import Encoder
+from pf_offboard.app.estimator import Estimator
+from pf_offboard.app.pipeline import Pipeline
+from pf_offboard.app.profiles import PX4
+
+from .helpers import attitude_quaternion, command, local_position, odometry
+
+
+class FakeFollower:
+    """Stateful like the real one: the command depends on the inputs and on a counter."""
+
+    speed = -1.5
+
+    def __init__(self, fail_at: int | None = None) -> None:
+        self.calls = 0
+        self.resets = 0
+        self.fail_at = fail_at
+
+    def update(self, position, velocity):
+        self.calls += 1
+        if self.calls == self.fail_at:
+            raise ValueError("projection diverged")
+        p, v = np.asarray(position), np.asarray(velocity)
+        return command(acceleration=-p - v + 0.001 * self.calls, yaw=float(p[0]), thrust=9.81 + p[2])
+
+    def reset(self) -> None:
+        self.resets += 1
+
+
+def telemetry():
+    for k in range(20):
+        yield attitude_quaternion(4 * k)
+        yield local_position(4 * k, (0.01 * k, -0.02 * k, -2.0), (0.1, 0.0, 0.0))
+
+
+def run(mode: str):
+    pipe = Pipeline(FakeFollower(), Encoder(mode, PX4, 1, 1, hover_thrust=0.5))
+    out = []
+    for msg in telemetry():
+        pipe.on_message(msg)
+        step = pipe.step()
+        if step is not None:
+            out.append(step)
+    return out
+
+
+@pytest.mark.parametrize("mode", ["acceleration", "attitude", "rates"])
+def test_one_step_per_fresh_sample_and_deterministic(mode: str) -> None:
+    a, b = run(mode), run(mode)
+    assert len(a) == 20
+    for x, y in zip(a, b):
+        assert x.setpoint.get_type() == y.setpoint.get_type()
+        for name in x.setpoint.get_fieldnames():
+            assert getattr(x.setpoint, name) == getattr(y.setpoint, name)
+        assert x.record == y.record
+    # setpoint timestamps come from the telemetry, not a clock
+    assert [s.setpoint.time_boot_ms for s in a] == [4 * k for k in range(20)]
+    rec = a[3].record
+    assert rec.time_s == pytest.approx(0.012)
+    assert rec.position_enu_m == pytest.approx((-0.06, 0.03, 2.0))
+    assert rec.speed_ref_m_s == -1.5 and rec.active and rec.mode == "following"
+
+
+def test_no_step_without_fresh_state() -> None:
+    pipe = Pipeline(FakeFollower(), Encoder("acceleration", PX4, 1, 1))
+    assert pipe.step() is None
+    pipe.on_message(attitude_quaternion(0))
+    assert pipe.step() is None
+    pipe.on_message(local_position(0))
+    assert pipe.step() is not None
+    assert pipe.step() is None
+    pipe.on_message(local_position(4))
+    pipe.mark_consumed()
+    assert pipe.step() is None
+
+
+def test_estimator_reset_resets_the_follower() -> None:
+    follower = FakeFollower()
+    pipe = Pipeline(follower, Encoder("acceleration", PX4, 1, 1), Estimator("odometry"))
+    pipe.on_message(odometry(1000, (0, 0, -2), (0, 0, 0), reset_counter=0))
+    assert "estimator_reset" not in pipe.step().record.event
+    pipe.on_message(odometry(5000, (2, -1, -2), (0, 0, 0), reset_counter=1))
+    step = pipe.step()
+    assert follower.resets == 1 and "estimator_reset" in step.record.event
+
+
+def test_core_failure_sends_hold_and_logs_it() -> None:
+    pipe = Pipeline(FakeFollower(fail_at=2), Encoder("acceleration", PX4, 1, 1))
+    pipe.on_message(local_position(0))
+    assert not pipe.step().encoded.replaced
+    pipe.on_message(local_position(4))
+    step = pipe.step()
+    assert step.command is None and step.encoded.replaced.startswith("controller failed")
+    assert math.isnan(step.record.thrust_cmd_m_s2) and "hold" in step.record.event
+    assert all(math.isfinite(getattr(step.setpoint, n)) for n in ("afx", "afy", "afz", "yaw"))
+    assert pipe.replaced_steps == 1

@@ -1,0 +1,49 @@
+"""Autopilot profiles: detection from HEARTBEAT, mode encodings, what each output mode needs."""
+
+import pytest
+
+from pf_offboard.app.profiles import ARDUPILOT, PX4, is_armed, px4_custom_mode, select_profile
+from pf_offboard.errors import InputError
+
+
+def test_detection_and_override() -> None:
+    assert select_profile("auto", 12) is PX4
+    assert select_profile(None, 3) is ARDUPILOT
+    assert select_profile("ardupilot", 12) is ARDUPILOT  # the flag wins
+    with pytest.raises(InputError) as info:
+        select_profile("auto", 8)
+    assert info.value.field == "--autopilot"
+    with pytest.raises(InputError):
+        select_profile("betaflight", 12)
+
+
+def test_px4_custom_mode_encoding() -> None:
+    # values observed on PX4 SITL (see autopilot-facts.md)
+    assert px4_custom_mode(6) == 393216
+    assert px4_custom_mode(4, 5) == 84148224  # AUTO.RTL
+    assert px4_custom_mode(4, 3) == 50593792  # AUTO.LOITER
+    assert PX4.is_offboard(393216)
+    assert not PX4.is_offboard(50593792)
+    assert PX4.mode_name(50593792) == "AUTO.LOITER"
+    assert PX4.hold_custom_mode == 50593792
+
+
+def test_ardupilot_modes() -> None:
+    assert ARDUPILOT.is_offboard(4)
+    assert not ARDUPILOT.is_offboard(5)
+    assert ARDUPILOT.mode_name(17) == "BRAKE"
+    assert (ARDUPILOT.hold.param2, ARDUPILOT.land.param2) == (5, 9)
+
+
+def test_what_each_output_mode_needs() -> None:
+    assert PX4.required_guid_options("rates") == 0
+    assert ARDUPILOT.required_guid_options("attitude") == 8
+    assert ARDUPILOT.required_guid_options("rates") == 8
+    assert ARDUPILOT.required_guid_options("acceleration") == 48
+    assert PX4.attitude_rates_ff == (False, False, True)  # PX4 drops roll/pitch FF next to a quaternion
+    assert ARDUPILOT.attitude_rates_ff == (True, True, True)
+    assert PX4.hover_thrust_param == "MPC_THR_HOVER" and ARDUPILOT.hover_thrust_param == "MOT_THST_HOVER"
+
+
+def test_armed_flag() -> None:
+    assert is_armed(0x91) and not is_armed(0x11)
