@@ -1,0 +1,33 @@
+"""Pure quadrotor simulation for the mock autopilot (no networking). World NED, body FRD.
+
+    from sitl_mock.dynamics import Simulator, preset, Spawn, AccelerationSetpoint
+    sim = Simulator(preset("fast"), rng=np.random.default_rng(0), spawn=Spawn.hover((0, 0, -2)))
+    state = sim.step(0.004, AccelerationSetpoint((0.0, 0.0, 0.0)))
+
+See docs/sitl-mock-dynamics.md.
+"""
+
+from .params import GRAVITY_M_S2, PRESET_NAMES, CascadeGains, VehicleParams, cascade_gains_for_poles, preset
+from .sim import PHYSICS_DT_S, PHYSICS_RATE_HZ, Simulator, quat_mul
+from .types import (
+    AccelerationSetpoint,
+    AttitudeSetpoint,
+    Gust,
+    MotorsOff,
+    PositionSetpoint,
+    RateSetpoint,
+    SensorNoise,
+    Setpoint,
+    Spawn,
+    VehicleState,
+    Wind,
+    euler_to_quat,
+    quat_to_euler,
+)
+
+__all__ = [
+    "GRAVITY_M_S2", "PHYSICS_DT_S", "PHYSICS_RATE_HZ", "PRESET_NAMES",
+    "AccelerationSetpoint", "AttitudeSetpoint", "CascadeGains", "Gust", "MotorsOff", "PositionSetpoint",
+    "RateSetpoint", "SensorNoise", "Setpoint", "Simulator", "Spawn", "VehicleParams", "VehicleState", "Wind",
+    "cascade_gains_for_poles", "euler_to_quat", "preset", "quat_mul", "quat_to_euler",
+]
