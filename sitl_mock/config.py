@@ -1,0 +1,169 @@
+"""Configuration of the mock autopilot: profile, vehicle, spawn, transports, clock, faults.
+
+Frozen dataclasses with units in the field names. Frames: NED (the autopilot's own), metres,
+seconds. Every validation error is a :class:`MockConfigError` naming the field.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sitl_mock.profiles import PROFILES
+
+
+class MockConfigError(ValueError):
+    """Bad mock configuration; ``field`` names the offending option."""
+
+    def __init__(self, field_name: str, reason: str) -> None:
+        super().__init__(f"{field_name}: {reason}")
+        self.field = field_name
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class SpawnSpec:
+    """Initial vehicle state (NED, metres, m/s).
+
+    kind ``ground``: landed, disarmed, at ``position_ned_m`` (z forced to 0).
+    kind ``hover``: armed, in the profile's hold mode, hovering at ``position_ned_m``.
+    kind ``throw``: armed with motors locked (like PX4 COM_THROW_EN), ballistic from
+    ``position_ned_m`` with ``velocity_ned_m_s`` until the client commands a mode.
+    """
+
+    kind: str = "ground"
+    position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    velocity_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @staticmethod
+    def parse(text: str) -> SpawnSpec:
+        """``ground`` | ``hover:x,y,z`` | ``throw:x,y,z,vx,vy,vz`` (NED: z = -altitude)."""
+        kind, _, rest = text.partition(":")
+        try:
+            values = tuple(float(v) for v in rest.split(",")) if rest else ()
+        except ValueError:
+            raise MockConfigError("spawn", f"numbers expected after '{kind}:', got {rest!r}") from None
+        if not all(math.isfinite(v) for v in values):
+            raise MockConfigError("spawn", "values must be finite")
+        if kind == "ground" and len(values) in (0, 2, 3):
+            pos = (values + (0.0, 0.0, 0.0))[:2] + (0.0,) if values else (0.0, 0.0, 0.0)
+            return SpawnSpec("ground", pos)
+        if kind == "hover" and len(values) == 3:
+            return SpawnSpec("hover", values)  # type: ignore[arg-type]
+        if kind == "throw" and len(values) == 6:
+            return SpawnSpec("throw", values[:3], values[3:])  # type: ignore[arg-type]
+        raise MockConfigError(
+            "spawn", f"expected ground | hover:x,y,z | throw:x,y,z,vx,vy,vz (NED), got {text!r}"
+        )
+
+
+@dataclass(frozen=True)
+class FaultConfig:
+    """Fault injection; all randomness from the mock's seeded Generator.
+
+    Probabilities are fractions 0..1 per datagram. ``loss`` drops outgoing and incoming
+    datagrams; ``duplicate``, ``corrupt`` and latency apply to outgoing datagrams (telemetry).
+    Times are simulated seconds since boot.
+    """
+
+    loss: float = 0.0
+    duplicate: float = 0.0
+    corrupt: float = 0.0  # a payload byte flipped after encoding: the receiver's CRC check fails
+    latency_s: float = 0.0
+    jitter_s: float = 0.0  # uniform extra delay in [0, jitter_s)
+    blackout_s: tuple[float, float] | None = None  # no outgoing datagrams for t in [t0, t1)
+    estimator_reset_at_s: float | None = None
+    estimator_reset_ned_m: tuple[float, float, float] = (2.0, -1.0, 0.0)
+    takeover_at_s: float | None = None
+    takeover_mode: str | None = None  # default: the profile's hold mode (POSCTL-like position hold)
+    gust_at_s: float | None = None
+    gust_ned_m_s: tuple[float, float, float] = (3.0, 0.0, 0.0)
+    gust_duration_s: float = 1.0
+
+    def validate(self) -> None:
+        for name in ("loss", "duplicate", "corrupt"):
+            value = getattr(self, name)
+            if not (0.0 <= value <= 1.0):
+                raise MockConfigError(f"faults.{name}", f"must be a fraction in [0, 1], got {value}")
+        for name in ("latency_s", "jitter_s", "gust_duration_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise MockConfigError(f"faults.{name}", f"must be >= 0 s, got {value}")
+        if self.blackout_s is not None:
+            t0, t1 = self.blackout_s
+            if not (math.isfinite(t0) and math.isfinite(t1) and 0 <= t0 <= t1):
+                raise MockConfigError("faults.blackout_s", f"need 0 <= t0 <= t1, got {self.blackout_s}")
+        for name in ("estimator_reset_ned_m", "gust_ned_m_s"):
+            if not all(math.isfinite(v) for v in getattr(self, name)):
+                raise MockConfigError(f"faults.{name}", "values must be finite")
+
+
+@dataclass(frozen=True)
+class MockConfig:
+    """Everything :class:`sitl_mock.MockAutopilot` needs.
+
+    Ports: ``0`` = ephemeral (read the bound ports from ``MockAutopilot.ports``); ``None``
+    disables that transport. ``udp_remote`` is where the UDP link sends before any client
+    has talked to it (PX4 SITL's 127.0.0.1:14540); every address that sends to the UDP port
+    is answered too.
+    """
+
+    profile: str = "px4"
+    vehicle: str = "fast"
+    spawn: SpawnSpec = SpawnSpec()
+    seed: int = 0
+    udp_local_port: int | None = 14580
+    udp_remote: tuple[str, int] | None = ("127.0.0.1", 14540)
+    tcp_port: int | None = None  # ArduPilot SITL uses 5760
+    host: str = "127.0.0.1"
+    speed: float = 1.0  # × real time (ignored in lockstep)
+    lockstep: bool = False
+    lockstep_dt_s: float = 0.004  # simulated time per received setpoint in lockstep
+    physics_dt_s: float = 0.001  # dynamics substep
+    step_dt_s: float = 0.004  # autopilot loop period (telemetry granularity) outside lockstep
+    ekf_ready_delay_s: float = 0.5  # position estimate ready after this (real ArduPilot: ~20-40 s)
+    home_lat_deg: float = 47.397742
+    home_lon_deg: float = 8.545594
+    home_alt_m: float = 488.0
+    faults: FaultConfig = field(default_factory=FaultConfig)
+    duration_s: float | None = None  # stop after this much simulated time
+    truth_log: str | None = None  # CSV of the true vehicle state, one row per autopilot step
+    scale_timeouts_with_speed: bool | None = None  # None: like the autopilot (PX4 yes, AP no)
+
+    def validate(self) -> None:
+        if self.profile not in PROFILES:
+            raise MockConfigError("profile", f"must be one of {sorted(PROFILES)}, got {self.profile!r}")
+        if not (math.isfinite(self.speed) and self.speed > 0):
+            raise MockConfigError("speed", f"must be > 0, got {self.speed}")
+        for name in ("lockstep_dt_s", "physics_dt_s", "step_dt_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0 < value <= 0.1):
+                raise MockConfigError(name, f"must be in (0, 0.1] s, got {value}")
+        if self.ekf_ready_delay_s < 0 or not math.isfinite(self.ekf_ready_delay_s):
+            raise MockConfigError("ekf_ready_delay_s", "must be >= 0")
+        for name in ("udp_local_port", "tcp_port"):
+            port = getattr(self, name)
+            if port is not None and not (0 <= port <= 65535):
+                raise MockConfigError(name, f"port out of range: {port}")
+        if self.udp_local_port is None and self.tcp_port is None:
+            raise MockConfigError("transports", "enable UDP and/or TCP")
+        if self.host not in ("127.0.0.1", "localhost", "::1"):
+            raise MockConfigError("host", "the mock binds loopback only (127.0.0.1)")
+        if self.duration_s is not None and not (self.duration_s > 0):
+            raise MockConfigError("duration_s", "must be > 0")
+        if self.spawn.kind not in ("ground", "hover", "throw"):
+            raise MockConfigError("spawn", f"unknown kind {self.spawn.kind!r}")
+        self.faults.validate()
+
+    def rng(self) -> np.random.Generator:
+        return np.random.default_rng(self.seed)
+
+    @property
+    def timeouts_scale(self) -> float:
+        """Factor on offboard-loss timeouts in simulated time (PX4 scales them under speed-up)."""
+        scale = self.scale_timeouts_with_speed
+        if scale is None:
+            scale = self.profile == "px4"
+        return self.speed if (scale and not self.lockstep) else 1.0

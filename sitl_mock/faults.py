@@ -1,0 +1,62 @@
+"""Link faults applied to encoded datagrams: loss, duplication, corruption, latency, blackout.
+
+Draws come from the mock's seeded Generator, a fixed number per datagram for each enabled
+fault, so runs with the same seed and the same traffic are identical.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sitl_mock.config import FaultConfig
+
+# MAVLink 2 header is 10 bytes; corrupting a byte after it (payload or CRC) makes the CRC fail.
+_HEADER_LEN = 10
+
+
+class FaultInjector:
+    """Decides the fate of each datagram. Times are simulated seconds."""
+
+    def __init__(self, config: FaultConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        self.rng = rng
+        self.dropped_out = 0
+        self.dropped_in = 0
+        self.duplicated = 0
+        self.corrupted = 0
+
+    def in_blackout(self, now_s: float) -> bool:
+        window = self.config.blackout_s
+        return window is not None and window[0] <= now_s < window[1]
+
+    def outgoing(self, data: bytes, now_s: float) -> list[tuple[float, bytes]]:
+        """(release time, bytes) for each copy to send; empty if the datagram is lost."""
+        cfg = self.config
+        if self.in_blackout(now_s):
+            self.dropped_out += 1
+            return []
+        if cfg.loss > 0.0 and self.rng.random() < cfg.loss:
+            self.dropped_out += 1
+            return []
+        if cfg.corrupt > 0.0:
+            hit, where = self.rng.random(), self.rng.random()
+            if hit < cfg.corrupt and len(data) > _HEADER_LEN:
+                index = _HEADER_LEN + int(where * (len(data) - _HEADER_LEN))
+                buf = bytearray(data)
+                buf[index] ^= 0xFF
+                data = bytes(buf)
+                self.corrupted += 1
+        copies = 1
+        if cfg.duplicate > 0.0 and self.rng.random() < cfg.duplicate:
+            copies = 2
+            self.duplicated += 1
+        delay = cfg.latency_s
+        if cfg.jitter_s > 0.0:
+            delay += cfg.jitter_s * self.rng.random()
+        return [(now_s + delay, data)] * copies
+
+    def drop_incoming(self) -> bool:
+        if self.config.loss > 0.0 and self.rng.random() < self.config.loss:
+            self.dropped_in += 1
+            return True
+        return False

@@ -1,0 +1,382 @@
+"""``MockAutopilot``: the pure :class:`~sitl_mock.autopilot.Autopilot` wired to loopback sockets.
+
+UDP (PX4 SITL offboard-API link style): one link bound to ``udp_local_port`` that sends to
+``udp_remote`` and to every address that has sent to it. TCP (ArduPilot SITL style): a server,
+one link per client. Each peer has its own pymavlink ``MAVLink`` object (sequence numbers,
+parser), srcSystem 1, srcComponent 1, MAVLink 2.
+
+Clock: real time × ``speed`` (a task steps the simulation at ``step_dt_s`` of simulated time),
+or lockstep (each received setpoint advances ``lockstep_dt_s``; while idle, HEARTBEAT and
+SYS_STATUS go out once per wall second so clients can connect).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import heapq
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, TextIO
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl_mock.autopilot import SETPOINT_IDS, Autopilot, Out
+from sitl_mock.config import MockConfig
+from sitl_mock.dynamics import VehicleState
+from sitl_mock.faults import FaultInjector
+
+UDP_LINK = 0
+_KEEPALIVE_IDS = (mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_SYS_STATUS)
+
+
+@dataclass(frozen=True)
+class Ports:
+    """Bound ports (None: transport disabled)."""
+
+    udp: int | None
+    tcp: int | None
+
+
+def new_mavlink() -> mavlink.MAVLink:
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    mav.robust_parsing = True
+    return mav
+
+
+def encode(mav: mavlink.MAVLink, msg: mavlink.MAVLink_message) -> bytes:
+    """Pack ``msg`` with ``mav``'s sequence number (MAVLink 2) and advance it."""
+    data = msg.pack(mav)
+    mav.seq = (mav.seq + 1) & 0xFF
+    return bytes(data)
+
+
+class _Peer:
+    """One remote endpoint: its encoder/parser and how to write to it."""
+
+    __slots__ = ("mav", "write", "link")
+
+    def __init__(self, link: int, write: Callable[[bytes], None]) -> None:
+        self.mav = new_mavlink()
+        self.write = write
+        self.link = link
+
+
+class _UdpProtocol(asyncio.DatagramProtocol):
+    def __init__(self, owner: MockAutopilot) -> None:
+        self.owner = owner
+
+    def datagram_received(self, data: bytes, addr: Any) -> None:
+        self.owner._udp_datagram(data, addr)
+
+    def error_received(self, exc: Exception) -> None:  # ICMP port unreachable: nobody listening yet
+        pass
+
+
+class MockAutopilot:
+    """The mock autopilot on loopback sockets. Use ``async with MockAutopilot(config) as mock``.
+
+    ``mock.ports`` gives the bound ports, ``mock.truth`` the true vehicle state,
+    ``mock.autopilot`` the state machine (mode, armed, params, log).
+    """
+
+    def __init__(self, config: MockConfig) -> None:
+        config.validate()
+        self.config = config
+        self.autopilot = Autopilot(config)
+        self.faults = FaultInjector(config.faults, self.autopilot.rng_faults)
+        self.ports = Ports(None, None)
+        self._udp: asyncio.DatagramTransport | None = None
+        self._udp_peers: dict[Any, _Peer] = {}
+        self._tcp_server: asyncio.base_events.Server | None = None
+        self._tcp_peers: dict[int, _Peer] = {}
+        self._next_link = 1
+        self._tasks: list[asyncio.Task[None]] = []
+        self._delayed: list[tuple[float, int, _Peer, bytes]] = []
+        self._delay_seq = 0
+        self._last_heartbeat_wall = -math.inf
+        self._truth_file: TextIO | None = None
+        self._truth_writer: Any = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._done: asyncio.Event | None = None
+        self.received = 0
+        self.steps = 0
+
+    # ------------------------------------------------------------------------------------------
+    # Lifecycle
+    # ------------------------------------------------------------------------------------------
+    async def __aenter__(self) -> MockAutopilot:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    async def start(self) -> None:
+        cfg = self.config
+        loop = asyncio.get_running_loop()
+        self._loop = loop
+        self._done = asyncio.Event()
+        udp_port = tcp_port = None
+        if cfg.udp_local_port is not None:
+            transport, _ = await loop.create_datagram_endpoint(
+                lambda: _UdpProtocol(self), local_addr=(cfg.host, cfg.udp_local_port)
+            )
+            self._udp = transport
+            udp_port = transport.get_extra_info("sockname")[1]
+            self.autopilot.add_link(UDP_LINK)
+            if cfg.udp_remote is not None:
+                self._udp_peer(cfg.udp_remote)
+        if cfg.tcp_port is not None:
+            self._tcp_server = await asyncio.start_server(self._tcp_client, cfg.host, cfg.tcp_port)
+            tcp_port = self._tcp_server.sockets[0].getsockname()[1]
+        self.ports = Ports(udp_port, tcp_port)
+        if cfg.truth_log:
+            self._truth_file = open(cfg.truth_log, "w", newline="")
+            self._truth_writer = csv.writer(self._truth_file)
+            self._truth_writer.writerow(TRUTH_COLUMNS)
+        self._emit(self.autopilot.due_telemetry())
+        if cfg.lockstep:
+            self._tasks.append(asyncio.create_task(self._keepalive()))
+        else:
+            self._tasks.append(asyncio.create_task(self._clock()))
+
+    async def stop(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            try:
+                await task
+            except asyncio.CancelledError:
+                pass
+        self._tasks.clear()
+        if self._udp is not None:
+            self._udp.close()
+            self._udp = None
+        if self._tcp_server is not None:
+            self._tcp_server.close()
+            for peer in list(self._tcp_peers.values()):
+                peer.write(b"")
+            await self._tcp_server.wait_closed()
+            self._tcp_server = None
+        if self._truth_file is not None:
+            self._truth_file.close()
+            self._truth_file = None
+        if self._done is not None:
+            self._done.set()
+
+    async def wait_done(self) -> None:
+        """Until ``duration_s`` of simulated time has run (or :meth:`stop`)."""
+        assert self._done is not None, "start() first"
+        await self._done.wait()
+
+    # ------------------------------------------------------------------------------------------
+    # State and injections
+    # ------------------------------------------------------------------------------------------
+    @property
+    def truth(self) -> VehicleState:
+        return self.autopilot.truth
+
+    @property
+    def time_s(self) -> float:
+        return self.autopilot.time_s
+
+    def inject_takeover(self, mode: str | None = None) -> None:
+        self._emit(self.autopilot.inject_takeover(mode))
+
+    def inject_estimator_reset(self, delta_ned_m: tuple[float, float, float]) -> None:
+        self._emit(self.autopilot.inject_estimator_reset(delta_ned_m))
+
+    def inject_gust(self, velocity_ned_m_s: tuple[float, float, float], duration_s: float = 1.0) -> None:
+        self.autopilot.inject_gust(velocity_ned_m_s, duration_s)
+
+    async def wait_for(self, predicate: Callable[[MockAutopilot], bool], timeout_s: float = 10.0) -> bool:
+        """Poll ``predicate(self)`` on the event loop until true or ``timeout_s`` wall seconds."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while not predicate(self):
+            if loop.time() > deadline:
+                return False
+            await asyncio.sleep(0.002)
+        return True
+
+    # ------------------------------------------------------------------------------------------
+    # Clock
+    # ------------------------------------------------------------------------------------------
+    async def _clock(self) -> None:
+        loop = asyncio.get_running_loop()
+        cfg = self.config
+        dt = cfg.step_dt_s
+        wall0 = loop.time()
+        sim0 = self.autopilot.time_s
+        while True:
+            target = sim0 + (loop.time() - wall0) * cfg.speed
+            batch = 0
+            while self.autopilot.time_s + dt <= target + 1e-9:
+                self._step(dt)
+                batch += 1
+                if self._finished():
+                    return
+                if batch >= 50:  # let received messages in when the host cannot keep up
+                    break
+            now_wall = loop.time()
+            next_wall = wall0 + (self.autopilot.time_s + dt - sim0) / cfg.speed
+            await asyncio.sleep(max(0.0, next_wall - now_wall))
+
+    async def _keepalive(self) -> None:
+        """Lockstep: HEARTBEAT + SYS_STATUS once per wall second so clients can connect."""
+        loop = asyncio.get_running_loop()
+        while True:
+            if loop.time() - self._last_heartbeat_wall >= 1.0:
+                self._send_keepalive()
+            await asyncio.sleep(0.25)
+
+    def _send_keepalive(self) -> None:
+        assert self._loop is not None
+        self._last_heartbeat_wall = self._loop.time()
+        if self.faults.in_blackout(self.autopilot.time_s):
+            return
+        for msgid in _KEEPALIVE_IDS:
+            msg = self.autopilot.build(msgid)
+            for peer in self._peers_of(None):
+                peer.write(encode(peer.mav, msg))  # not through the fault RNG: keeps runs deterministic
+
+    def _finished(self) -> bool:
+        duration = self.config.duration_s
+        if duration is not None and self.autopilot.time_s >= duration - 1e-9:
+            assert self._done is not None
+            self._done.set()
+            return True
+        return False
+
+    def _step(self, dt: float) -> None:
+        ap = self.autopilot
+        events = ap.step(dt)
+        self.steps += 1
+        if events:
+            self._emit(events)
+        self._emit(ap.due_telemetry())
+        if self._delayed:
+            self._flush_delayed()
+        if self._truth_writer is not None:
+            self._truth_writer.writerow(truth_row(ap))
+
+    # ------------------------------------------------------------------------------------------
+    # Sending
+    # ------------------------------------------------------------------------------------------
+    def _peers_of(self, link: int | None) -> list[_Peer]:
+        if link is None:
+            return list(self._udp_peers.values()) + list(self._tcp_peers.values())
+        if link == UDP_LINK:
+            return list(self._udp_peers.values())
+        peer = self._tcp_peers.get(link)
+        return [peer] if peer is not None else []
+
+    def _emit(self, outs: list[Out]) -> None:
+        now = self.autopilot.time_s
+        faults = self.faults
+        for link, msg in outs:
+            if link is None or msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+                if self._loop is not None:
+                    self._last_heartbeat_wall = self._loop.time()
+            for peer in self._peers_of(link):
+                data = encode(peer.mav, msg)
+                for release, chunk in faults.outgoing(data, now):
+                    if release <= now:
+                        peer.write(chunk)
+                    else:
+                        self._delay_seq += 1
+                        heapq.heappush(self._delayed, (release, self._delay_seq, peer, chunk))
+
+    def _flush_delayed(self) -> None:
+        now = self.autopilot.time_s
+        while self._delayed and self._delayed[0][0] <= now:
+            _, _, peer, chunk = heapq.heappop(self._delayed)
+            peer.write(chunk)
+
+    # ------------------------------------------------------------------------------------------
+    # Receiving
+    # ------------------------------------------------------------------------------------------
+    def _udp_peer(self, addr: Any) -> _Peer:
+        peer = self._udp_peers.get(addr)
+        if peer is None:
+            udp = self._udp
+            assert udp is not None
+
+            def write(data: bytes, addr: Any = addr) -> None:
+                if data and self._udp is not None:
+                    udp.sendto(data, addr)
+
+            peer = _Peer(UDP_LINK, write)
+            self._udp_peers[addr] = peer
+        return peer
+
+    def _udp_datagram(self, data: bytes, addr: Any) -> None:
+        peer = self._udp_peer(addr)
+        self._receive(peer, data)
+
+    async def _tcp_client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        link = self._next_link
+        self._next_link += 1
+
+        def write(data: bytes) -> None:
+            if not data:
+                writer.close()
+            elif not writer.is_closing():
+                writer.write(data)
+
+        peer = _Peer(link, write)
+        self._tcp_peers[link] = peer
+        self.autopilot.add_link(link)
+        try:
+            while True:
+                data = await reader.read(65536)
+                if not data:
+                    break
+                self._receive(peer, data)
+        except (ConnectionError, asyncio.CancelledError):
+            pass
+        finally:
+            self._tcp_peers.pop(link, None)
+            self.autopilot.remove_link(link)
+            writer.close()
+
+    def _receive(self, peer: _Peer, data: bytes) -> None:
+        if self.config.faults.loss > 0.0 and self.faults.drop_incoming():
+            return
+        try:
+            msgs = peer.mav.parse_buffer(data)
+        except Exception:  # malformed traffic must never stop the mock  # noqa: BLE001
+            return
+        if not msgs:
+            return
+        ap = self.autopilot
+        lockstep = self.config.lockstep
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA":
+                continue
+            self.received += 1
+            replies = ap.handle(msg, peer.link)
+            if replies:
+                self._emit(replies)
+            if lockstep and msg.get_msgId() in SETPOINT_IDS and not self._finished():
+                self._step(self.config.lockstep_dt_s)
+                if self._finished():
+                    return
+
+
+TRUTH_COLUMNS = (
+    "time_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "qw", "qx", "qy", "qz",
+    "p_rad_s", "q_rad_s", "r_rad_s", "armed", "mode", "landed", "est_x_m", "est_y_m", "est_z_m",
+)
+
+
+def truth_row(ap: Autopilot) -> list[object]:
+    s = ap.truth
+    est = ap.est_position_ned_m
+    return [
+        f"{s.time_s:.4f}", *(f"{v:.5f}" for v in s.position_ned_m), *(f"{v:.5f}" for v in s.velocity_ned_m_s),
+        *(f"{v:.6f}" for v in s.q_ned_frd), *(f"{v:.5f}" for v in s.rates_frd_rad_s),
+        int(ap.armed), ap.mode.name, int(s.landed), *(f"{v:.5f}" for v in est),
+    ]
