@@ -112,21 +112,33 @@ class ControlLaw:
         mu = 1.0
         iv = ts.line_interval((bx + tx, by + ty, bz + tz + G), m1)
         if iv is None:
+            # No room for the full transversal correction: scale it (mu) down until there is. If
+            # even coasting (mu = 0) is infeasible, also scale the coasting term (nu) towards
+            # hover, which is always feasible. Both scalings are continuous in the state.
             reduced = True
             if ts.line_interval((bx, by, bz + G), m1) is None:
-                # Even coasting is infeasible (e.g. far too fast around a bend): best effort, clipped.
-                f = ts.clip((bx + tx, by + ty, bz + tz + G))
-                return LawOutput((f[0], f[1], f[2] - G), True, True, limited)
-            lo, hi = 0.0, 1.0
-            for _ in range(_BISECTION_STEPS):
-                mid = 0.5 * (lo + hi)
-                if ts.line_interval((bx + mid * tx, by + mid * ty, bz + mid * tz + G), m1) is None:
-                    hi = mid
-                else:
-                    lo = mid
-            mu = lo
+                lo, hi = 0.0, 1.0
+                for _ in range(_BISECTION_STEPS):
+                    mid = 0.5 * (lo + hi)
+                    if ts.line_interval((mid * bx, mid * by, mid * bz + G), m1) is None:
+                        hi = mid
+                    else:
+                        lo = mid
+                bx, by, bz = lo * bx, lo * by, lo * bz
+                mu = 0.0
+            else:
+                lo, hi = 0.0, 1.0
+                for _ in range(_BISECTION_STEPS):
+                    mid = 0.5 * (lo + hi)
+                    if ts.line_interval((bx + mid * tx, by + mid * ty, bz + mid * tz + G), m1) is None:
+                        hi = mid
+                    else:
+                        lo = mid
+                mu = lo
             iv = ts.line_interval((bx + mu * tx, by + mu * ty, bz + mu * tz + G), m1)
-            assert iv is not None
+            if iv is None:  # only through rounding at the bisection's end: fall back on the clip
+                f = ts.clip((bx + mu * tx, by + mu * ty, bz + mu * tz + G))
+                return LawOutput((f[0], f[1], f[2] - G), True, True, limited)
         clipped = False
         if u_eta < iv[0]:
             u_eta = iv[0]

@@ -1,0 +1,317 @@
+"""YAML configuration: path, speed, gains, yaw, limits, flight. Loaded into frozen dataclasses.
+
+Every problem raises one :class:`~pf_offboard.errors.ConfigError` naming the dotted field
+(``path.waypoints[3]``, ``gains.transversal.bandwidth_hz``) and the reason. Unknown keys are errors
+(a typo must not silently fly with a default). Only ``path`` is required; every other field has a
+safe default (docs/controller.md lists them). Way-points and yaw given in ``ned`` are converted
+to the core's ENU frame with :mod:`pf_offboard.frames`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from pf_offboard.control.types import GRAVITY_M_S2, Gains, Limits, YawSpec
+from pf_offboard.errors import ConfigError, InputError
+from pf_offboard.frames import ned_to_enu, yaw_ned_to_enu, yaw_rate_ned_to_enu
+
+MAX_SPEED_M_S = 20.0
+OUTPUT_MODES = ("acceleration", "attitude", "rates")
+END_ACTIONS = ("hold", "land")
+FRAMES = ("enu", "ned")
+MOVING_FRAMES = ("auto", "frenet", "rmf")
+
+
+@dataclass(frozen=True)
+class PathConfig:
+    """``frame``: frame the way-points were written in; ``waypoints_enu_m`` are always ENU (m)."""
+
+    waypoints_enu_m: tuple[tuple[float, float, float], ...]
+    closed: bool = False
+    frame: str = "enu"
+    moving_frame: str = "auto"
+
+
+@dataclass(frozen=True)
+class FlightConfig:
+    """How the app flies (consumed by pf_offboard.app; see docs there)."""
+
+    output_mode: str = "acceleration"  # acceleration | attitude | rates
+    setpoint_rate_hz: float = 50.0  # >= 20 (PX4 offboard needs > 2 Hz; control needs more)
+    state_timeout_s: float = 0.5  # no fresh state for this long: stop path following (failsafe)
+    hover_thrust: float | None = None  # normalised hover thrust 0.05..0.95; None: from the autopilot
+    takeoff_altitude_m: float = 2.0
+    throw_activation_height_m: float | None = None  # None: no throw activation
+    end_action: str = "hold"  # at the end of an open path: hold | land
+    attitude_time_constant_s: float = 0.2  # rates mode: attitude error feedback time constant
+
+
+@dataclass(frozen=True)
+class Config:
+    path: PathConfig
+    speed_m_s: float = 1.0
+    gains: Gains = field(default_factory=Gains)
+    yaw: YawSpec = field(default_factory=YawSpec)
+    limits: Limits = field(default_factory=Limits)
+    flight: FlightConfig = field(default_factory=FlightConfig)
+    source: str = "<config>"
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _section(data: Any, name: str, allowed: tuple[str, ...], required: bool = False) -> Mapping[str, Any]:
+    if data is None:
+        if required:
+            raise ConfigError(name, "missing (required section)")
+        return {}
+    if not isinstance(data, Mapping):
+        raise ConfigError(name or "<top level>", f"must be a mapping, got {type(data).__name__}")
+    for key in data:
+        if key not in allowed:
+            raise ConfigError(f"{name}.{key}" if name else str(key), f"unknown key (allowed: {', '.join(allowed)})")
+    return data
+
+
+def _number(
+    data: Mapping[str, Any],
+    key: str,
+    name: str,
+    default: float | None,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    nullable: bool = False,
+) -> float | None:
+    if key not in data:
+        return default
+    v = data[key]
+    if v is None and nullable:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ConfigError(name, f"must be a number, got {v!r}")
+    v = float(v)
+    if not math.isfinite(v):
+        raise ConfigError(name, f"must be finite, got {v}")
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise ConfigError(name, f"must be {'>' if lo_open else '>='} {lo:g}, got {v:g}")
+    if hi is not None and v > hi:
+        raise ConfigError(name, f"must be <= {hi:g}, got {v:g}")
+    return v
+
+
+def _choice(data: Mapping[str, Any], key: str, name: str, default: str, choices: tuple[str, ...]) -> str:
+    v = data.get(key, default)
+    if not isinstance(v, str) or v not in choices:
+        raise ConfigError(name, f"must be one of {', '.join(choices)}, got {v!r}")
+    return v
+
+
+def _bool(data: Mapping[str, Any], key: str, name: str, default: bool) -> bool:
+    v = data.get(key, default)
+    if not isinstance(v, bool):
+        raise ConfigError(name, f"must be true or false, got {v!r}")
+    return v
+
+
+def _pairs(value: Any, name: str, width: int) -> list[list[float]]:
+    if not isinstance(value, (list, tuple)):
+        raise ConfigError(name, f"must be a list of [{', '.join(['number'] * width)}] entries")
+    out = []
+    for i, row in enumerate(value):
+        item = f"{name}[{i}]"
+        if not isinstance(row, (list, tuple)) or len(row) != width:
+            raise ConfigError(item, f"must be a list of {width} numbers, got {row!r}")
+        vals = []
+        for x in row:
+            if isinstance(x, bool) or not isinstance(x, (int, float)):
+                raise ConfigError(item, f"must be {width} numbers, got {row!r}")
+            if not math.isfinite(float(x)):
+                raise ConfigError(item, f"must be finite, got {row!r}")
+            vals.append(float(x))
+        out.append(vals)
+    return out
+
+
+# ---------------------------------------------------------------------------------- sections
+def _path(data: Any) -> PathConfig:
+    d = _section(data, "path", ("frame", "closed", "moving_frame", "waypoints"), required=True)
+    frame = _choice(d, "frame", "path.frame", "enu", FRAMES)
+    closed = _bool(d, "closed", "path.closed", False)
+    moving = _choice(d, "moving_frame", "path.moving_frame", "auto", MOVING_FRAMES)
+    if "waypoints" not in d:
+        raise ConfigError("path.waypoints", "missing (required)")
+    pts = _pairs(d["waypoints"], "path.waypoints", 3)
+    if frame == "ned":
+        pts = [ned_to_enu(p).tolist() for p in pts]
+    waypoints = tuple((p[0], p[1], p[2]) for p in pts)
+    # Build the path once so that every geometric problem (duplicates, too few points, a spline
+    # that doubles back, frenet on a straight piece) is reported at load time, named in config terms.
+    from pf_offboard.path import Path
+
+    try:
+        Path.from_waypoints(waypoints, closed=closed, frame=moving)
+    except InputError as exc:
+        fld = exc.field if exc.field.startswith("path.") else f"path.{exc.field}"
+        raise ConfigError(fld, exc.reason) from None
+    return PathConfig(waypoints, closed, frame, moving)
+
+
+def _gains(data: Any) -> Gains:
+    d = _section(data, "gains", ("transversal", "tangential"))
+    default = Gains()
+    vals = {}
+    for loop in ("transversal", "tangential"):
+        sub = _section(d.get(loop), f"gains.{loop}", ("bandwidth_hz", "damping"))
+        vals[f"{loop}_bandwidth_hz"] = _number(
+            sub, "bandwidth_hz", f"gains.{loop}.bandwidth_hz", getattr(default, f"{loop}_bandwidth_hz"), 0.0, 50.0, lo_open=True
+        )
+        vals[f"{loop}_damping"] = _number(
+            sub, "damping", f"gains.{loop}.damping", getattr(default, f"{loop}_damping"), 0.0, 5.0, lo_open=True
+        )
+    return Gains(**vals)  # type: ignore[arg-type]
+
+
+def _yaw(data: Any, frame: str, closed: bool) -> YawSpec:
+    d = _section(data, "yaw", ("mode", "yaw_deg", "table"))
+    mode = _choice(d, "mode", "yaw.mode", "constant", ("constant", "tangent", "table"))
+    yaw_deg = _number(d, "yaw_deg", "yaw.yaw_deg", 0.0, -3600.0, 3600.0)
+    assert yaw_deg is not None
+    yaw = math.radians(yaw_deg)
+    if frame == "ned":
+        # a heading converts as a heading; an offset from the tangent is a rotation sense
+        yaw = yaw_ned_to_enu(yaw) if mode == "constant" else yaw_rate_ned_to_enu(yaw)
+    table: list[tuple[float, float]] = []
+    if "table" in d:
+        rows = _pairs(d["table"], "yaw.table", 2)
+        prev = -math.inf
+        for i, (s, psi_deg) in enumerate(rows):
+            if s < 0.0:
+                raise ConfigError(f"yaw.table[{i}]", f"eta1 must be >= 0 m, got {s:g}")
+            if s <= prev:
+                raise ConfigError(f"yaw.table[{i}]", "eta1 values must be strictly increasing")
+            prev = s
+            psi = math.radians(psi_deg)
+            table.append((s, yaw_ned_to_enu(psi) if frame == "ned" else psi))
+        if frame == "ned":
+            # keep the table continuous after the per-entry wrap of the conversion
+            unwrapped = [table[0][1]]
+            for _, p in table[1:]:
+                unwrapped.append(unwrapped[-1] + math.remainder(p - unwrapped[-1], 2.0 * math.pi))
+            table = [(s, p) for (s, _), p in zip(table, unwrapped)]
+    if mode == "table" and len(table) < 2:
+        raise ConfigError("yaw.table", "mode table needs at least 2 [eta1_m, yaw_deg] entries")
+    return YawSpec(mode, yaw, tuple(table))
+
+
+def _limits(data: Any) -> Limits:
+    d = _section(data, "limits", ("max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s"))
+    default = Limits()
+    g = GRAVITY_M_S2
+    tilt = _number(d, "max_tilt_deg", "limits.max_tilt_deg", default.max_tilt_deg, 0.0, 80.0, lo_open=True)
+    tmin = _number(d, "min_thrust_m_s2", "limits.min_thrust_m_s2", default.min_thrust_m_s2, 0.0, round(0.9 * g, 3))
+    tmax = _number(d, "max_thrust_m_s2", "limits.max_thrust_m_s2", default.max_thrust_m_s2, round(1.1 * g, 3), 100.0)
+    vapp = _number(
+        d, "max_approach_speed_m_s", "limits.max_approach_speed_m_s", default.max_approach_speed_m_s, 0.05, 20.0
+    )
+    return Limits(tilt, tmin, tmax, vapp)  # type: ignore[arg-type]
+
+
+def _flight(data: Any) -> FlightConfig:
+    keys = (
+        "output_mode",
+        "setpoint_rate_hz",
+        "state_timeout_s",
+        "hover_thrust",
+        "takeoff_altitude_m",
+        "throw_activation_height_m",
+        "end_action",
+        "attitude_time_constant_s",
+    )
+    d = _section(data, "flight", keys)
+    f = FlightConfig()
+    return FlightConfig(
+        output_mode=_choice(d, "output_mode", "flight.output_mode", f.output_mode, OUTPUT_MODES),
+        setpoint_rate_hz=_number(d, "setpoint_rate_hz", "flight.setpoint_rate_hz", f.setpoint_rate_hz, 20.0, 1000.0),  # type: ignore[arg-type]
+        state_timeout_s=_number(d, "state_timeout_s", "flight.state_timeout_s", f.state_timeout_s, 0.0, 5.0, lo_open=True),  # type: ignore[arg-type]
+        hover_thrust=_number(d, "hover_thrust", "flight.hover_thrust", f.hover_thrust, 0.05, 0.95, nullable=True),
+        takeoff_altitude_m=_number(d, "takeoff_altitude_m", "flight.takeoff_altitude_m", f.takeoff_altitude_m, 0.3, 100.0),  # type: ignore[arg-type]
+        throw_activation_height_m=_number(
+            d, "throw_activation_height_m", "flight.throw_activation_height_m", f.throw_activation_height_m, 0.3, 100.0, nullable=True
+        ),
+        end_action=_choice(d, "end_action", "flight.end_action", f.end_action, END_ACTIONS),
+        attitude_time_constant_s=_number(
+            d, "attitude_time_constant_s", "flight.attitude_time_constant_s", f.attitude_time_constant_s, 0.02, 2.0
+        ),  # type: ignore[arg-type]
+    )
+
+
+TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight")
+
+
+def parse_config(data: Any, source: str = "<config>") -> Config:
+    """Validate a parsed YAML mapping into a :class:`Config` (ENU)."""
+    d = _section(data, "", TOP_LEVEL, required=True) if data is not None else None
+    if d is None:
+        raise ConfigError("path", "missing (required section); the config is empty")
+    path = _path(d.get("path"))
+    speed = _number(d, "speed_m_s", "speed_m_s", 1.0, -MAX_SPEED_M_S, MAX_SPEED_M_S)
+    assert speed is not None
+    if speed == 0.0:
+        raise ConfigError("speed_m_s", "must be non-zero (its sign picks the direction of travel)")
+    return Config(
+        path=path,
+        speed_m_s=speed,
+        gains=_gains(d.get("gains")),
+        yaw=_yaw(d.get("yaw"), path.frame, path.closed),
+        limits=_limits(d.get("limits")),
+        flight=_flight(d.get("flight")),
+        source=source,
+    )
+
+
+class _StrictLoader:
+    """A SafeLoader that rejects duplicate keys (a silently overridden key is a typo too)."""
+
+    @staticmethod
+    def make() -> type:
+        import yaml
+
+        class Loader(yaml.SafeLoader):
+            pass
+
+        def construct_mapping(loader: Any, node: Any, deep: bool = False) -> dict[Any, Any]:
+            seen: dict[Any, Any] = {}
+            for key_node, value_node in node.value:
+                key = loader.construct_object(key_node, deep=deep)
+                if key in seen:
+                    line = key_node.start_mark.line + 1
+                    raise ConfigError(str(key), f"duplicate key at line {line}")
+                seen[key] = loader.construct_object(value_node, deep=deep)
+            return seen
+
+        Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, construct_mapping)
+        return Loader
+
+
+def load_config(path: str | os.PathLike[str]) -> Config:
+    """Read and validate a YAML config file."""
+    import yaml
+
+    source = os.fspath(path)
+    try:
+        with open(source, encoding="utf-8") as fh:
+            text = fh.read()
+    except OSError as exc:
+        raise ConfigError(source, f"cannot read config file: {exc.strerror or exc}") from None
+    try:
+        data = yaml.load(text, Loader=_StrictLoader.make())  # noqa: S506 - a SafeLoader subclass
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "unknown position"
+        raise ConfigError(source, f"YAML syntax error at {where}: {exc.problem or exc.context}") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(source, f"YAML error: {exc}") from None
+    return parse_config(data, source=source)
