@@ -170,7 +170,7 @@ def _fast() -> VehicleParams:
         yaw=cascade_gains_for_poles(60.0, tau, rate_limit_rad_s=6.0, rate_i_fraction=0.5,
                                     attitude_accel_max_rad_s2=20.0),
         airmode=False,
-        attitude_loop_hz=500.0,
+        attitude_loop_hz=250.0,
         tilt_max_rad=math.radians(60.0),
         thrust_min_norm=0.05,
         thrust_max_norm=1.0,
