@@ -17,7 +17,7 @@ import math
 import struct
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any, TextIO
 
@@ -308,7 +308,9 @@ class Bridge:
             self.pipeline.mark_consumed()
             self._send(position_setpoint(self.link.target.system, self.link.target.component, time_boot_ms(est), self._takeoff_target, self._takeoff_yaw))
             return
-        if phase in (Phase.WAITING, Phase.ENGAGING, Phase.PREFLIGHT) and self._stream_follow_before_active:
+        if (phase in (Phase.WAITING, Phase.ENGAGING) and self._stream_follow_before_active) or (
+            phase is Phase.PREFLIGHT and self._neutral_allowed()
+        ):
             # proof of life: the follower's own command, so the first active setpoint continues it
             # from the throw trigger / mode request on these setpoints take effect: mark them active
             step = self.pipeline.step(phase.value, phase is Phase.ENGAGING, self._pending_event())
@@ -370,6 +372,17 @@ class Bridge:
         self._last_send_wall = self.clock()
         self.sent_setpoints += 1
 
+    def _neutral_allowed(self) -> bool:
+        """Setpoints are harmless while the autopilot is known not to be in OFFBOARD / GUIDED."""
+        return self.custom_mode is not None and not self.profile.is_offboard(self.custom_mode)
+
+    def _send_neutral(self) -> None:
+        """Before the first state sample: the hold of our output mode at rest. The autopilot
+        ignores it outside OFFBOARD / GUIDED (we never send it there); it starts PX4's
+        proof-of-life clock and drives a lockstep simulator to its first telemetry."""
+        rest = StateEstimate(0.0, np.zeros(3), np.zeros(3), None, None, 0)
+        self._send(self.pipeline.encoder.hold(rest, 0).message)
+
     def _command(self, command: int, *params: float) -> None:
         p = list(params) + [0.0] * (7 - len(params))
         self.acks.pop(command, None)
@@ -428,7 +441,7 @@ class Bridge:
             mavlink2.MAV_CMD_COMPONENT_ARM_DISARM,
         )
 
-    async def request_interval(self, message_id: int, rate_hz: float) -> None:
+    def request_interval(self, message_id: int, rate_hz: float) -> None:
         """SET_MESSAGE_INTERVAL; a refusal is reported, not fatal (the stream may already flow)."""
         self._command(mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, float(message_id), 1e6 / rate_hz)
 
@@ -475,9 +488,12 @@ class Bridge:
             self.phase = Phase.DONE if code == EXIT_OK else Phase.FAILED
         self._changed.set()
 
-    async def fly(self) -> FlightResult:
-        """Launch, follow, hand back. Returns how it ended (never raises LinkError)."""
+    async def fly(self, setup: Callable[[], Awaitable[None]] | None = None) -> FlightResult:
+        """``setup`` (streams, parameters), launch, follow, hand back. Returns how it ended
+        (LinkError becomes exit 3; InputError from ``setup`` propagates)."""
         try:
+            if setup is not None:
+                await setup()
             await self._launch()
             await self._wait_until(lambda: self.phase not in (Phase.FOLLOWING, Phase.ENGAGING, Phase.WAITING), math.inf)
             if self.phase is Phase.HANDING_BACK:
@@ -610,6 +626,8 @@ class Bridge:
                 return
             if self._last_setpoint is not None and now - self._last_send_wall >= period:
                 self._send(self._last_setpoint)
+            elif self._last_setpoint is None and self.phase is Phase.PREFLIGHT and self._neutral_allowed():
+                self._send_neutral()
 
     async def heartbeat(self) -> None:
         while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):

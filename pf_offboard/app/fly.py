@@ -188,29 +188,29 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
         )  # fmt: skip
         link.start_reading(bridge.on_message)
 
-        # telemetry at the rates we need: state at the setpoint rate (a fresh sample drives each
-        # setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s where honoured.
-        state_id = mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED if args.state_source == "local_position" else mavlink2.MAVLINK_MSG_ID_ODOMETRY
-        for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
-            await bridge.request_interval(msg_id, rate)
-
-        hover = settings.hover_thrust
-        if hover is None and settings.output_mode != "acceleration":
-            hover = await bridge.read_param(profile.hover_thrust_param)
-            if not 0.05 <= hover <= 0.95:
-                raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
-        pipeline.encoder = Encoder(
-            settings.output_mode, profile, target.system, target.component,
-            hover_thrust=float(hover) if hover is not None else 0.5, time_constant_s=settings.attitude_time_constant_s,
-        )  # fmt: skip
-        if profile.autopilot is Autopilot.ARDUPILOT:
-            await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
+        async def setup() -> None:
+            # telemetry at the rates we need: state at the setpoint rate (a fresh sample drives
+            # each setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s where honoured.
+            state_id = mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED if args.state_source == "local_position" else mavlink2.MAVLINK_MSG_ID_ODOMETRY
+            for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
+                bridge.request_interval(msg_id, rate)
+            hover = settings.hover_thrust
+            if hover is None and settings.output_mode != "acceleration":
+                hover = await bridge.read_param(profile.hover_thrust_param)
+                if not 0.05 <= hover <= 0.95:
+                    raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
+            pipeline.encoder = Encoder(
+                settings.output_mode, profile, target.system, target.component,
+                hover_thrust=float(hover) if hover is not None else 0.5, time_constant_s=settings.attitude_time_constant_s,
+            )  # fmt: skip
+            if profile.autopilot is Autopilot.ARDUPILOT:
+                await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
 
         loop = asyncio.get_running_loop()
         loop.add_signal_handler(signal.SIGINT, bridge.request_stop)
         try:
             async with asyncio.TaskGroup() as tg:
-                flight = tg.create_task(bridge.fly())
+                flight = tg.create_task(bridge.fly(setup))
                 tg.create_task(bridge.keepalive())
                 tg.create_task(bridge.heartbeat())
                 tg.create_task(bridge.status_line())
