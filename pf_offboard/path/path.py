@@ -200,6 +200,7 @@ class Path:
             return cache[1]
         (t, t1, t2), (e, e1, e2), (b, b1, b2) = self.frame_jets(lam)
         a = np.array((t, e, b, t1, e1, b1, t2, e2, b2))
+        a.flags.writeable = False  # the result is cached: nobody may modify it in place
         out = FrameDerivs(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8])
         self._frame_cache = (lam, out)
         return out
