@@ -49,6 +49,11 @@ TUBE_INNER = 0.8
 TUBE_OUTER = 0.9
 # Past an open path's end the approach to the end point takes over within this distance (m).
 END_BLEND_M = 0.05
+# Far from the path the transverse coordinates rotate with the moving frame about a lever arm of
+# the offset, and holding (xi2, phi2) would whirl the vehicle around the path: beyond
+# FAR_OUTER_M the Cartesian approach law is used, within FAR_INNER_M the exact law, a blend between.
+FAR_INNER_M = 0.5
+FAR_OUTER_M = 1.0
 
 
 def evaluate_terms(path: Path, lam: float, position: ArrayLike, velocity: ArrayLike) -> ExactTerms:
@@ -168,18 +173,27 @@ class PathFollower:
         st = terms.state
         eta2_ref = self.reference_speed(st.eta1)
         # blend weight of the approach fallback
+        r = (y[0] - s[0], y[1] - s[1], y[2] - s[2])
+        dist = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
         w = (terms.tube - TUBE_INNER) / (TUBE_OUTER - TUBE_INNER)
+        w_far = (dist - FAR_INNER_M) / (FAR_OUTER_M - FAR_INNER_M)
+        if w_far > w:
+            w = w_far
+        past_end = False
         if not self._closed and (lam <= 0.0 or lam >= self._lam_max):
             out = terms.tangential_offset_m if lam > 0.0 else -terms.tangential_offset_m
-            w = max(w, out / END_BLEND_M)
+            if out > 0.0:
+                past_end = True
+                w = max(w, out / END_BLEND_M)
         w = 0.0 if w <= 0.0 else (1.0 if w >= 1.0 else w)
         law = self.law
         tube: LawOutput | None = law.tube(terms, eta2_ref) if w < 1.0 else None
         if tube is None:
             w = 1.0
-        r = (y[0] - s[0], y[1] - s[1], y[2] - s[2])
+        inv_s = 1.0 / math.sqrt(s[3] * s[3] + s[4] * s[4] + s[5] * s[5])
+        tan = (s[3] * inv_s, s[4] * inv_s, s[5] * inv_s)
         if w > 0.0:
-            app = law.approach(r, v)
+            app = law.approach(r, v, tan, 0.0 if past_end else eta2_ref)
             if tube is None:
                 res = app
             else:
@@ -202,7 +216,7 @@ class PathFollower:
         thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
         tilt, thrust_sat = law.thrust_set.active(f)
         # feed-forward: on-path motion at eta2_ref (eqs. 25-27 via arclength derivatives)
-        tan, sss_ss, sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
+        _, sss_ss, sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
         psi, dpsi = self._yaw.evaluate(st.eta1, tan, sss_ss)
         eta2 = st.eta2 if w == 0.0 else (1.0 - w) * st.eta2 + w * (tan[0] * v[0] + tan[1] * v[1] + tan[2] * v[2])
         yaw_rate = dpsi * eta2
@@ -220,6 +234,6 @@ class PathFollower:
             yaw_rate=yaw_rate,
             state=st,
             lam=lam,
-            cross_track_m=math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]),
+            cross_track_m=dist,
             saturation=Saturation(res.tangential, res.transversal, tilt, thrust_sat, res.approach_speed),
         )

@@ -153,22 +153,42 @@ class ControlLaw:
         )
         return LawOutput(a, clipped, reduced, limited)
 
-    def approach(self, r: Vec, v: Vec, target_velocity: Vec = (0.0, 0.0, 0.0)) -> LawOutput:
-        """Fallback outside the tube / past an open path's end: fly to the point ``y - r`` with limits."""
+    def approach(self, r: Vec, v: Vec, t: Vec, eta2_ref: float) -> LawOutput:
+        """Cartesian law far from the path / outside the tube / past an open path's end.
+
+        ``r = y - target`` (target: the closest point, or the end point), ``t`` the unit tangent
+        there. Desired velocity: toward the target at :meth:`approach_speed` plus ``eta2_ref``
+        along t. The correction across t has priority: it gets up to the guaranteed acceleration,
+        the tangential correction the rest of that ball (so the result is always feasible).
+        """
         d = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
         if d > 0.0:
             speed, limited = self.approach_speed(d)
             k = speed / d
         else:
             k, limited = 0.0, False
-        ax = self.kd * (target_velocity[0] - k * r[0] - v[0])
-        ay = self.kd * (target_velocity[1] - k * r[1] - v[1])
-        az = self.kd * (target_velocity[2] - k * r[2] - v[2])
-        n = math.sqrt(ax * ax + ay * ay + az * az)
+        ex = -k * r[0] - v[0]
+        ey = -k * r[1] - v[1]
+        ez = -k * r[2] - v[2]
+        et = ex * t[0] + ey * t[1] + ez * t[2]
+        # across t
+        px = self.kd * (ex - et * t[0])
+        py = self.kd * (ey - et * t[1])
+        pz = self.kd * (ez - et * t[2])
+        n = math.sqrt(px * px + py * py + pz * pz)
         reduced = False
         if n > self.u_max:
-            s = self.u_max / n
-            ax, ay, az = ax * s, ay * s, az * s
+            c = self.u_max / n
+            px, py, pz = px * c, py * c, pz * c
+            n = self.u_max
             reduced = True
-        f = self.thrust_set.clip((ax, ay, az + G))
-        return LawOutput((f[0], f[1], f[2] - G), True, reduced, limited)
+        # along t
+        at = self.kd_t * (et + eta2_ref)
+        room = math.sqrt(max(self.u_max * self.u_max - n * n, 0.0))
+        clipped = False
+        if at > room:
+            at, clipped = room, True
+        elif at < -room:
+            at, clipped = -room, True
+        f = self.thrust_set.clip((px + at * t[0], py + at * t[1], pz + at * t[2] + G))
+        return LawOutput((f[0], f[1], f[2] - G), clipped, reduced, limited)

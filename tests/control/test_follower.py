@@ -1,0 +1,221 @@
+"""Closed-loop behaviour of PathFollower on the ideal double integrator (4): invariance,
+attractiveness from random starts with limits respected, the self-intersection, straight
+segments, open-path ends, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import config_path, rk4_step
+
+from pf_offboard import Gains, Limits, Path, PathFollower, YawSpec
+from pf_offboard.control.feasible import ThrustSet
+from pf_offboard.control.types import GRAVITY_M_S2
+from pf_offboard.errors import InputError
+
+G = GRAVITY_M_S2
+
+
+def feasible(limits: Limits, a: np.ndarray, tol: float = 1e-6) -> bool:
+    return ThrustSet(limits.min_thrust_m_s2, limits.max_thrust_m_s2, limits.tan_tilt).contains(
+        (a[0], a[1], a[2] + G), tol
+    )
+
+
+@pytest.mark.parametrize("speed", [1.5, -1.5])
+def test_invariance_60_s_rk4(paper_path, speed):
+    """Started on the path with velocity eta2_ref t, it stays on the path (<= 1e-5 m) for 60 s."""
+    f = PathFollower(paper_path, speed=speed)
+    lam0 = 0.37 * paper_path.lam_max
+    y = paper_path.eval(lam0).sigma.copy()
+    v = speed * paper_path.frame(lam0).t
+    dt = 1e-3
+    worst = 0.0
+    eta1_travel = 0.0
+    prev = f.transverse_state(y, v).eta1
+    for _ in range(60_000):
+        y, v = rk4_step(f, y, v, dt)
+        st = f.transverse_state(y, v)
+        worst = max(worst, math.hypot(st.xi1, st.phi1))
+        d = st.eta1 - prev
+        eta1_travel += d - paper_path.length_m * round(d / paper_path.length_m)
+        prev = st.eta1
+    assert worst <= 1e-5
+    assert abs(st.eta2 - speed) < 1e-6
+    assert eta1_travel == pytest.approx(60.0 * speed, rel=1e-5)
+
+
+def random_start(path: Path, rng: np.random.Generator):
+    lam = rng.uniform(0.0, path.lam_max)
+    d = rng.normal(size=3)
+    y = path.eval(lam).sigma + d / np.linalg.norm(d) * rng.uniform(0.0, 5.0)
+    w = rng.normal(size=3)
+    return y, w / np.linalg.norm(w) * rng.uniform(0.0, 4.0)
+
+
+def test_attractive_from_200_random_starts_with_limits(paper_path):
+    """Up to 5 m off and 4 m/s in any direction: converge to ||(xi1, phi1)|| < 1 cm and
+    |eta2 - eta2_ref| < 1 cm/s; every command feasible; approach speed within the limit."""
+    rng = np.random.default_rng(20260522)
+    limits = Limits(max_tilt_deg=35.0, min_thrust_m_s2=2.0, max_thrust_m_s2=20.0, max_approach_speed_m_s=2.0)
+    dt = 0.005
+    times = []
+    for i in range(200):
+        speed = 1.5 if i % 2 else -1.5
+        f = PathFollower(paper_path, speed=speed, limits=limits)
+        y, v = random_start(paper_path, rng)
+        converged_at = None
+        for k in range(int(20.0 / dt)):
+            c = f.update(y, v)
+            a = c.acceleration
+            assert np.all(np.isfinite(a)) and np.all(np.isfinite(c.body_rates))
+            assert feasible(limits, a), (i, k, a)
+            st = c.state
+            if k * dt > 1.5 and c.cross_track_m > 1e-3:
+                # after the initial velocity has been dealt with, never approach faster than allowed
+                r = y - paper_path.eval(c.lam).sigma
+                assert -(r @ v) / np.linalg.norm(r) <= limits.max_approach_speed_m_s + 0.05, (i, k)
+            if math.hypot(st.xi1, st.phi1) < 0.01 and abs(st.eta2 - speed) < 0.01:
+                if converged_at is None:
+                    converged_at = k * dt
+            else:
+                converged_at = None  # passing through the band is not convergence
+            if converged_at is not None and k * dt > converged_at + 0.5:
+                break  # stayed in the band for 0.5 s
+            v = v + dt * a
+            y = y + dt * v
+        assert converged_at is not None, (i, y, v, st)
+        times.append(converged_at)
+    assert max(times) < 10.0
+    print(f"convergence time: median {np.median(times):.2f} s, max {max(times):.2f} s")
+
+
+@pytest.mark.parametrize("speed", [1.5, -1.5])
+def test_self_intersection_eta1_monotonic(paper_path, speed):
+    """Two laps through the self-intersection: eta1 advances every step by eta2_ref dt (no branch jump)."""
+    f = PathFollower(paper_path, speed=speed)
+    y = paper_path.eval(0.0).sigma.copy()
+    v = speed * paper_path.frame(0.0).t
+    dt = 0.005
+    prev = f.update(y, v).state.eta1
+    L = paper_path.length_m
+    n = int(2 * L / abs(speed) / dt)
+    for _ in range(n):
+        y, v = rk4_step(f, y, v, dt)
+        eta1 = f.transverse_state(y, v).eta1
+        d = eta1 - prev
+        d -= L * round(d / L)
+        assert d * speed > 0.0
+        assert abs(d - speed * dt) < 1e-6
+        prev = eta1
+
+
+def test_self_intersection_passes_near_the_crossing(paper_path):
+    """The paper path really crosses itself (so the test above is meaningful)."""
+    lam = np.linspace(0.0, paper_path.lam_max, 1000, endpoint=False)
+    pts = np.array([paper_path.eval(x).sigma for x in lam])
+    d = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=2)
+    sep = np.abs(lam[:, None] - lam[None, :])
+    sep = np.minimum(sep, paper_path.lam_max - sep)
+    assert d[sep > 2.0].min() < 0.02  # samples are 1.6 cm apart along the path
+
+
+def _fly(f: PathFollower, y, v, seconds: float, dt: float = 0.005):
+    cmds = []
+    for _ in range(int(seconds / dt)):
+        c = f.update(y, v)
+        cmds.append(c)
+        v = v + dt * c.acceleration
+        y = y + dt * v
+    return cmds, y, v
+
+
+@pytest.mark.parametrize("name", ["straight.yaml", "racetrack.yaml"])
+def test_straight_segments_rmf_no_nans_or_spikes(name):
+    f = PathFollower.from_config(config_path(name))
+    assert f.path.frame_kind == "rmf"
+    lam = 0.3 * f.path.lam_max
+    pt = f.path.eval(lam)
+    y = pt.sigma + np.array([0.3, -0.4, 0.2])
+    v = np.zeros(3)
+    cmds, y, v = _fly(f, y, v, 8.0)
+    acc = np.array([c.acceleration for c in cmds])
+    rates = np.array([c.body_rates for c in cmds])
+    assert np.all(np.isfinite(acc)) and np.all(np.isfinite(rates))
+    assert all(feasible(f.limits, a) for a in acc)
+    # after convergence: smooth commands (no spikes) and on the path
+    tail = acc[len(acc) // 2 :]
+    assert np.abs(np.diff(tail, axis=0)).max() < 0.5  # m/s^2 per 5 ms step
+    assert np.abs(rates[len(rates) // 2 :]).max() < 5.0
+    assert cmds[-1].cross_track_m < 0.01
+
+
+def test_open_path_stops_at_its_end(helix_frenet):
+    """An open path: the follower brakes and holds at the end point (no NaN past the end)."""
+    for speed in (1.5, -1.5):
+        f = PathFollower(helix_frenet, speed=speed)
+        lam0 = 0.8 * helix_frenet.lam_max if speed > 0 else 0.2 * helix_frenet.lam_max
+        y = helix_frenet.eval(lam0).sigma.copy()
+        v = speed * helix_frenet.frame(lam0).t
+        cmds, y, v = _fly(f, y, v, 12.0)
+        end = helix_frenet.eval(helix_frenet.lam_max if speed > 0 else 0.0).sigma
+        assert np.linalg.norm(y - end) < 0.02
+        assert np.linalg.norm(v) < 0.02
+        assert all(np.all(np.isfinite(c.acceleration)) for c in cmds)
+
+
+def test_far_start_bounded_and_limits_respected(paper_path):
+    """100 m away at 10 m/s: commands stay within the limits, no NaN, heading back."""
+    f = PathFollower(paper_path, speed=1.5)
+    y = np.array([100.0, -40.0, 30.0])
+    v = np.array([0.0, 10.0, -3.0])
+    cmds, y2, _ = _fly(f, y, v, 10.0)
+    assert all(feasible(f.limits, c.acceleration) for c in cmds)
+    assert cmds[-1].cross_track_m < cmds[0].cross_track_m - 15.0
+
+
+def test_one_metre_offset_respects_limits_and_priority(paper_path):
+    """With the paper gains, 1 m off asks kp * 1 m > 1000 m/s^2 unlimited; the command is feasible,
+    points toward the path and the tangential part is the one cut back."""
+    f = PathFollower(paper_path, speed=1.5)
+    assert f.gains.transversal_kp > 1000.0
+    lam = 0.5 * paper_path.lam_max
+    fr = paper_path.frame(lam)
+    y = paper_path.eval(lam).sigma + 0.45 * fr.e3  # inside the exact-law region
+    c = f.update(y, np.zeros(3))
+    assert feasible(f.limits, c.acceleration)
+    assert c.acceleration @ fr.e3 < -1.0  # toward the path
+    assert c.saturation.transversal and c.saturation.tangential
+
+
+def test_bad_input_raises_and_never_commands():
+    path = Path.from_waypoints([[0, 0, 1], [1, 0, 1], [1, 1, 1.5]], closed=True)
+    f = PathFollower(path, speed=1.0)
+    with pytest.raises(InputError):
+        f.update([math.nan, 0.0, 1.0], [0.0, 0.0, 0.0])
+    with pytest.raises(InputError):
+        f.update([0.0, 0.0, 1.0], [0.0, math.inf, 0.0])
+    with pytest.raises(InputError):
+        f.update([0.0, 0.0], [0.0, 0.0, 0.0])
+    for bad in (0.0, math.nan, 25.0):
+        with pytest.raises(InputError):
+            PathFollower(path, speed=bad)
+
+
+def test_value_objects_and_reset(paper_path):
+    f = PathFollower(paper_path, speed=-1.5, gains=Gains(), yaw=YawSpec.constant(0.3), limits=Limits())
+    y = paper_path.eval(1.0).sigma + 0.1
+    c = f.update(y, np.zeros(3))
+    assert c.attitude.shape == (4,) and abs(np.linalg.norm(c.attitude) - 1.0) < 1e-12
+    assert c.thrust == pytest.approx(np.linalg.norm(c.acceleration + [0, 0, G]))
+    assert c.yaw == pytest.approx(0.3)
+    alpha, beta = f.decoupling(y, np.zeros(3))
+    assert alpha.shape == (3,) and beta.shape == (3, 3)
+    f.reset()
+    assert f.transverse_state(y, np.zeros(3)) == pytest.approx(c.state)
+    with pytest.raises(InputError):
+        Gains(transversal_bandwidth_hz=0.0)
+    with pytest.raises(InputError):
+        Limits(max_tilt_deg=90.0)
