@@ -260,6 +260,10 @@ class Autopilot:
             return self._on_param_read(msg, link) if self._for_me(msg) else []
         if msgid == mavlink.MAVLINK_MSG_ID_PARAM_SET:
             return self._on_param_set(msg) if self._for_me(msg) else []
+        if msgid == mavlink.MAVLINK_MSG_ID_PING and msg.target_system == 0:
+            # A ping request: answer it addressed to the sender.
+            reply = mavlink.MAVLink_ping_message(msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent())
+            return [(link, reply)]
         if msgid == mavlink.MAVLINK_MSG_ID_TIMESYNC and msg.tc1 == 0:
             return [(link, mavlink.MAVLink_timesync_message(int(self.time_s * 1e9), msg.ts1))]
         return []
@@ -380,10 +384,11 @@ class Autopilot:
     # --- commands -----------------------------------------------------------------------------
     def _on_command(self, msg: mavlink.MAVLink_message, link: int) -> list[Out]:
         is_int = msg.get_msgId() == mavlink.MAVLINK_MSG_ID_COMMAND_INT
-        p = [msg.param1, msg.param2, msg.param3, msg.param4]
+        p = [float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4)]
         p += [float(msg.x), float(msg.y), float(msg.z)] if is_int else [msg.param5, msg.param6, msg.param7]
+        # NaN in a parameter that is read as an integer counts as 0 (unused / default).
+        p = [v if math.isfinite(v) else (v if i == 6 else 0.0) for i, v in enumerate(map(float, p))]
         command = int(msg.command)
-        extra: list[Out] = []
         result, extra = self._dispatch(command, p, link)
 
         ack = mavlink.MAVLink_command_ack_message(

@@ -50,6 +50,8 @@ class SpawnSpec:
         if kind == "ground" and len(values) in (0, 2, 3):
             pos = (values + (0.0, 0.0, 0.0))[:2] + (0.0,) if values else (0.0, 0.0, 0.0)
             return SpawnSpec("ground", pos)
+        if kind in ("hover", "throw") and len(values) >= 3 and values[2] > 0.0:
+            raise MockConfigError("spawn", f"z must be <= 0 (NED, z = -altitude), got {values[2]}")
         if kind == "hover" and len(values) == 3:
             return SpawnSpec("hover", values)  # type: ignore[arg-type]
         if kind == "throw" and len(values) == 6:

@@ -1,0 +1,74 @@
+"""Helpers for tests and scripts that talk to the mock: free ports, command messages, a client.
+
+Used by ``tests/sitl_mock`` and usable by the app's tests. Loopback only.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+
+from pymavlink.dialects.v20 import common as mavlink
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that was free a moment ago (for a client to listen on)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def command_long(command: int, *params: float, target_system: int = 1) -> mavlink.MAVLink_command_long_message:
+    values = list(params) + [0.0] * (7 - len(params))
+    return mavlink.MAVLink_command_long_message(target_system, 1, command, 0, *values)
+
+
+def accel_setpoint(ax: float, ay: float, az: float, yaw: float | None = None) -> mavlink.MAVLink_message:
+    """SET_POSITION_TARGET_LOCAL_NED, acceleration only (type_mask 0x0C3F, or 0x083F with yaw)."""
+    mask = 0x083F if yaw is not None else 0x0C3F
+    return mavlink.MAVLink_set_position_target_local_ned_message(
+        0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, mask, 0, 0, 0, 0, 0, 0, ax, ay, az, yaw or 0.0, 0.0
+    )
+
+
+class UdpClient:
+    """A blocking pymavlink client on a connected UDP socket (sysid 255, compid 190)."""
+
+    def __init__(self, port: int, timeout_s: float = 5.0) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.connect(("127.0.0.1", port))
+        self.sock.settimeout(timeout_s)
+        self.mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        self.mav.robust_parsing = True
+        self.bad = 0
+
+    def send(self, msg: mavlink.MAVLink_message) -> None:
+        self.sock.send(msg.pack(self.mav))
+        self.mav.seq = (self.mav.seq + 1) & 0xFF
+
+    def recv(self) -> list[mavlink.MAVLink_message]:
+        """Messages of one datagram (CRC failures counted in ``bad`` and dropped)."""
+        out = []
+        for msg in self.mav.parse_buffer(self.sock.recv(65536)) or []:
+            if msg.get_type() == "BAD_DATA":
+                self.bad += 1
+            else:
+                out.append(msg)
+        return out
+
+    def wait(self, msg_type: str, timeout_s: float = 5.0, condition=lambda m: True) -> mavlink.MAVLink_message:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            for msg in self.recv():
+                if msg.get_type() == msg_type and condition(msg):
+                    return msg
+        raise TimeoutError(f"no {msg_type} within {timeout_s} s")
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> UdpClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
