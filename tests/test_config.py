@@ -1,0 +1,162 @@
+"""YAML config schema: every shipped config loads; every bad input gives one ConfigError naming
+the dotted field and the reason."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path as FsPath
+
+import pytest
+import yaml
+
+from pf_offboard import PathFollower, load_config, parse_config
+from pf_offboard.config import Config, FlightConfig
+from pf_offboard.control.types import Gains, Limits
+from pf_offboard.errors import ConfigError, InputError
+
+ROOT = FsPath(__file__).resolve().parents[1]
+SQUARE = [[0.0, 0.0, 2.0], [2.0, 0.0, 2.0], [2.0, 2.0, 2.5], [0.0, 2.0, 2.0]]
+
+
+def minimal(**over) -> dict:
+    d = {"path": {"closed": True, "waypoints": [list(p) for p in SQUARE]}}
+    d.update(over)
+    return d
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in (ROOT / "configs").glob("*.yaml")))
+def test_shipped_configs_load_and_build(name):
+    cfg = load_config(ROOT / "configs" / name)
+    assert isinstance(cfg, Config)
+    f = PathFollower.from_config(cfg)
+    assert f.speed == cfg.speed_m_s
+
+
+def test_paper_config_is_the_paper_setting():
+    cfg = load_config(ROOT / "configs" / "paper.yaml")
+    assert cfg.speed_m_s == -1.5
+    assert cfg.gains == Gains(6.0, 0.7, 4.0, 0.8)
+    assert cfg.yaw.mode == "constant" and cfg.yaw.yaw_rad == 0.0
+    assert cfg.path.closed and len(cfg.path.waypoints_enu_m) == 7
+
+
+def test_defaults_for_everything_but_the_path():
+    cfg = parse_config(minimal())
+    assert cfg.speed_m_s == 1.0
+    assert cfg.gains == Gains()
+    assert cfg.limits == Limits()
+    assert cfg.flight == FlightConfig()
+    assert cfg.path.frame == "enu" and cfg.path.moving_frame == "auto"
+
+
+def test_ned_waypoints_and_yaw_are_converted():
+    ned = [[p[1], p[0], -p[2]] for p in SQUARE]
+    cfg = parse_config(
+        {"path": {"frame": "ned", "closed": True, "waypoints": ned}, "yaw": {"mode": "constant", "yaw_deg": 90.0}}
+    )
+    assert [list(p) for p in cfg.path.waypoints_enu_m] == SQUARE
+    assert cfg.yaw.yaw_rad == pytest.approx(0.0, abs=1e-12)  # NED east = ENU 0
+    cfg = parse_config(
+        {
+            "path": {"frame": "ned", "closed": True, "waypoints": ned},
+            "yaw": {"mode": "table", "table": [[0.0, 0.0], [2.0, 90.0], [4.0, 180.0]]},
+        }
+    )
+    psi = [p for _, p in cfg.yaw.table_eta1_m_yaw_rad]
+    assert psi[0] == pytest.approx(math.pi / 2)
+    assert psi[1] == pytest.approx(0.0, abs=1e-12)
+    assert psi[2] == pytest.approx(-math.pi / 2)  # unwrapped: continuous, not +3 pi / 2
+    cfg = parse_config({"path": {"frame": "ned", "closed": True, "waypoints": ned}, "yaw": {"mode": "tangent", "yaw_deg": 10.0}})
+    assert cfg.yaw.yaw_rad == pytest.approx(-math.radians(10.0))  # clockwise offset in NED
+
+
+BAD = [
+    ({"path": None}, "path", "missing"),
+    ({"pathh": {}}, "pathh", "unknown key"),
+    (minimal(speed_m_s=0), "speed_m_s", "non-zero"),
+    (minimal(speed_m_s=25.0), "speed_m_s", "<= 20"),
+    (minimal(speed_m_s="fast"), "speed_m_s", "number"),
+    (minimal(speed_m_s=True), "speed_m_s", "number"),
+    (minimal(speed_m_s=float("nan")), "speed_m_s", "finite"),
+    (minimal(gains={"transversal": {"bandwidth_hz": -1.0}}), "gains.transversal.bandwidth_hz", "> 0"),
+    (minimal(gains={"transversal": {"bandwith_hz": 6.0}}), "gains.transversal.bandwith_hz", "unknown key"),
+    (minimal(gains={"tangential": {"damping": float("inf")}}), "gains.tangential.damping", "finite"),
+    (minimal(gains=[1, 2]), "gains", "mapping"),
+    (minimal(limits={"max_tilt_deg": 85.0}), "limits.max_tilt_deg", "<= 80"),
+    (minimal(limits={"max_thrust_m_s2": 9.0}), "limits.max_thrust_m_s2", ">="),
+    (minimal(limits={"min_thrust_m_s2": -1.0}), "limits.min_thrust_m_s2", ">= 0"),
+    (minimal(limits={"max_approach_speed_m_s": 0.0}), "limits.max_approach_speed_m_s", ">="),
+    (minimal(yaw={"mode": "spin"}), "yaw.mode", "one of"),
+    (minimal(yaw={"mode": "table"}), "yaw.table", "at least 2"),
+    (minimal(yaw={"mode": "table", "table": [[0.0, 0.0], [0.0, 10.0]]}), "yaw.table[1]", "increasing"),
+    (minimal(yaw={"mode": "table", "table": [[0.0, 0.0], [1.0]]}), "yaw.table[1]", "2 numbers"),
+    (minimal(flight={"output_mode": "thrust"}), "flight.output_mode", "one of"),
+    (minimal(flight={"setpoint_rate_hz": 10}), "flight.setpoint_rate_hz", ">= 20"),
+    (minimal(flight={"hover_thrust": 1.2}), "flight.hover_thrust", "<= 0.95"),
+    (minimal(flight={"end_action": "crash"}), "flight.end_action", "one of"),
+    (minimal(flight={"state_timeout": 1.0}), "flight.state_timeout", "unknown key"),
+    ({"path": {"closed": True}}, "path.waypoints", "missing"),
+    ({"path": {"closed": "yes", "waypoints": SQUARE}}, "path.closed", "true or false"),
+    ({"path": {"frame": "xyz", "waypoints": SQUARE}}, "path.frame", "one of"),
+    ({"path": {"moving_frame": "bishop", "waypoints": SQUARE}}, "path.moving_frame", "one of"),
+    ({"path": {"waypoints": [[0, 0, 1], [1, 0, 1], [1, 1, 1], [1, 1]]}}, "path.waypoints[3]", "3 numbers"),
+    ({"path": {"waypoints": [[0, 0, 1], [1, 0, 1], [1, "a", 1]]}}, "path.waypoints[2]", "3 numbers"),
+    ({"path": {"waypoints": [[0, 0, 1], [1, 0, 1], [1, float("nan"), 1]]}}, "path.waypoints[2]", "finite"),
+    ({"path": {"waypoints": [[0, 0, 1], [1, 0, 1], [1, 0, 1], [2, 2, 2]]}}, "path.waypoints[2]", "duplicate"),
+    ({"path": {"closed": True, "waypoints": [[0, 0, 1], [1, 0, 1]]}}, "path.waypoints", "at least 3"),
+    ({"path": {"moving_frame": "frenet", "waypoints": [[0, 0, 1], [1, 1, 1], [2, 2, 1]]}}, "path.moving_frame", "frenet"),
+    ([1, 2, 3], "<top level>", "mapping"),
+]
+
+
+@pytest.mark.parametrize("data,field,reason", BAD, ids=[b[1] + ":" + b[2] for b in BAD])
+def test_bad_values_name_field_and_reason(data, field, reason):
+    with pytest.raises(ConfigError) as err:
+        parse_config(data)
+    assert err.value.field == field
+    assert reason in err.value.reason
+    assert isinstance(err.value, InputError)
+
+
+def test_yaml_syntax_error_has_line_number(tmp_path):
+    p = tmp_path / "bad.yaml"
+    p.write_text("path:\n  closed: true\n  waypoints: [[0, 0, 1], [1, 0, 1]\nspeed_m_s: 1.0\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(p)
+    assert err.value.field == str(p)
+    assert "line " in err.value.reason and "syntax" in err.value.reason
+
+
+def test_duplicate_key_is_an_error(tmp_path):
+    p = tmp_path / "dup.yaml"
+    p.write_text(yaml.safe_dump(minimal()) + "speed_m_s: 1.0\nspeed_m_s: 2.0\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(p)
+    assert err.value.field == "speed_m_s" and "duplicate" in err.value.reason
+
+
+def test_missing_file_and_empty_file(tmp_path):
+    with pytest.raises(ConfigError) as err:
+        load_config(tmp_path / "nope.yaml")
+    assert "cannot read" in err.value.reason
+    p = tmp_path / "empty.yaml"
+    p.write_text("# nothing\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(p)
+    assert err.value.field == "path"
+
+
+def test_yaml_nan_is_rejected(tmp_path):
+    p = tmp_path / "nan.yaml"
+    p.write_text(yaml.safe_dump(minimal()) + "limits: {max_tilt_deg: .nan}\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(p)
+    assert err.value.field == "limits.max_tilt_deg" and "finite" in err.value.reason
+
+
+def test_round_trip_file(tmp_path):
+    p = tmp_path / "ok.yaml"
+    p.write_text(yaml.safe_dump(minimal(speed_m_s=-2.0, flight={"hover_thrust": None, "output_mode": "rates"})))
+    cfg = load_config(p)
+    assert cfg.speed_m_s == -2.0 and cfg.flight.output_mode == "rates" and cfg.flight.hover_thrust is None
+    assert cfg.source == str(p)
