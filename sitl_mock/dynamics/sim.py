@@ -266,10 +266,12 @@ class Simulator:
         self._att_div = int(round(PHYSICS_RATE_HZ / pr.attitude_loop_hz))
         self._att_dt = self._att_div * dt
         rp, yw = pr.roll_pitch, pr.yaw
-        # PX4 yaw weight: roll/pitch first; the reduced yaw error gets the roll gain.
+        # PX4 yaw weight: roll/pitch first. PX4 scales the yaw error by yaw_w and the yaw gain by
+        # 1/yaw_w; we undo the error scaling instead (same linear law) so that the square-root
+        # limiter below sees the true yaw error.
         self._yaw_w = min(1.0, yw.attitude_p_1_s / rp.attitude_p_1_s)
-        self._k_att = (rp.attitude_p_1_s, rp.attitude_p_1_s,
-                       yw.attitude_p_1_s / self._yaw_w if self._yaw_w < 1.0 else yw.attitude_p_1_s)
+        self._yaw_err_scale = 1.0 / self._yaw_w
+        self._k_att = (rp.attitude_p_1_s, rp.attitude_p_1_s, yw.attitude_p_1_s)
         self._rate_lim = (rp.rate_limit_rad_s, rp.rate_limit_rad_s, yw.rate_limit_rad_s)
         self._att_accel_max = (rp.attitude_accel_max_rad_s2, yw.attitude_accel_max_rad_s2)
         self._cos_tilt_max = math.cos(pr.tilt_max_rad)
@@ -486,7 +488,7 @@ class Simulator:
         ez = qw * dz - qx * dy + qy * dx - qz * dw
         s = 2.0 if ew >= 0.0 else -2.0
         kx, ky, kz = self._k_att
-        ex, ey, ez = s * ex, s * ey, s * ez
+        ex, ey, ez = s * ex, s * ey, s * ez * self._yaw_err_scale
         amx, amz = self._att_accel_max
         # Yaw-rate feed-forward about WORLD z, expressed in body (third row of R).
         rx_ = _p_or_sqrt(kx, amx, ex) + ffx + yaw_rate_w * 2.0 * (qx * qz - qw * qy)
