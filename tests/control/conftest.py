@@ -59,16 +59,19 @@ def helix_rmf() -> Path:
 
 
 def rk4_step(follower, y: np.ndarray, v: np.ndarray, dt: float):
-    """One RK4 step of the ideal double integrator (4) under follower.update(); returns (y, v)."""
+    """One RK4 step of the ideal double integrator (4) under follower.update().
+
+    Returns (y, v) after the step and the command at the start of the step."""
 
     def acc(p, q):
         return follower.update(p, q).acceleration
 
-    a1 = acc(y, v)
+    cmd = follower.update(y, v)
+    a1 = cmd.acceleration
     a2 = acc(y + 0.5 * dt * v, v + 0.5 * dt * a1)
     a3 = acc(y + 0.5 * dt * (v + 0.5 * dt * a1), v + 0.5 * dt * a2)
     a4 = acc(y + dt * (v + 0.5 * dt * a2), v + dt * a3)
-    return y + dt * v + dt * dt / 6.0 * (a1 + a2 + a3), v + dt / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4)
+    return y + dt * v + dt * dt / 6.0 * (a1 + a2 + a3), v + dt / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4), cmd
 
 
 def config_path(name: str) -> FsPath:
