@@ -48,9 +48,8 @@ class Run:
         act: list[float] = []
         prev = False
         for ti, r in zip(t, records):
-            if (r.active and not prev) or r.event == "activated":
-                if not act or ti - act[-1] > 1e-9:
-                    act.append(float(ti))
+            if r.active and not prev:  # setpoints start to fly: launch, throw trigger, re-engage
+                act.append(float(ti))
             prev = r.active
         return cls(name, records, t, tuple(act))
 
@@ -84,10 +83,9 @@ def _start_label(run: Run) -> str:
 def _reference_path(config_path: Path | None) -> NDArray[np.float64] | None:
     if config_path is None:
         return None
-    from pf_offboard.config import load_config  # the core; imported only when plotting a path
+    from pf_offboard.control import PathFollower  # the core; imported only when plotting a path
 
-    cfg = load_config(config_path)
-    path = cfg.path
+    path = PathFollower.from_config(config_path).path
     lam = np.linspace(0.0, path.lam_max, 600)
     return np.array([path.eval(float(x)).sigma for x in lam])
 
@@ -97,13 +95,34 @@ def _mark_activation(ax: object, run: Run, label: bool) -> None:
         ax.axvline(ta, color="0.4", ls=":", lw=1.0, label="activation" if (label and i == 0) else None)  # type: ignore[attr-defined]
 
 
+def _break_wraps(eta1_m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """η1 of a closed path wraps at the path length: leave a gap there instead of a vertical line."""
+    out = eta1_m.astype(float).copy()
+    finite = out[np.isfinite(out)]
+    if finite.size < 2:
+        return out
+    span = float(np.max(finite) - np.min(finite))
+    jumps = np.flatnonzero(np.abs(np.diff(out)) > 0.5 * span)
+    out[jumps] = np.nan
+    return out
+
+
+def _equal_aspect(ax: object, points: NDArray[np.float64]) -> None:
+    """Metres look like metres: equal scale on x, y, z."""
+    finite = points[np.all(np.isfinite(points), axis=1)]
+    if finite.size == 0:
+        return
+    lo, hi = finite.min(axis=0), finite.max(axis=0)
+    ax.set_box_aspect(np.maximum(hi - lo, 0.2 * float(np.max(hi - lo)) + 1e-6))  # type: ignore[attr-defined]
+
+
 def plot_path3d(runs: Sequence[Run], reference: NDArray[np.float64] | None, out: Path, title: str) -> Path:
     import matplotlib.pyplot as plt
 
     fig = plt.figure(figsize=(6.4, 5.2))
     ax = fig.add_subplot(projection="3d")
     if reference is not None:
-        ax.plot(reference[:, 0], reference[:, 1], reference[:, 2], color="k", lw=2.2, label="reference path")
+        ax.plot(reference[:, 0], reference[:, 1], reference[:, 2], color="k", ls="--", lw=1.4, label="reference path")
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, run in enumerate(runs):
         c = colors[k % len(colors)]
@@ -112,6 +131,8 @@ def plot_path3d(runs: Sequence[Run], reference: NDArray[np.float64] | None, out:
         ax.scatter(*p[0], color=c, marker="o", s=28, depthshade=False)
         if run.first_active > 0:
             ax.scatter(*p[run.first_active], color=c, marker="x", s=36, depthshade=False)
+    pts = [run.col("position_enu_m") for run in runs] + ([reference] if reference is not None else [])
+    _equal_aspect(ax, np.vstack(pts))
     ax.set_xlabel("x east [m]")
     ax.set_ylabel("y north [m]")
     ax.set_zlabel("z up [m]")
@@ -127,7 +148,7 @@ def plot_tangential(run: Run, out: Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, (a1, a2) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 4.6))
-    a1.plot(run.t_s, run.col("eta1_m"), lw=1.3, label=r"$\eta_1$")
+    a1.plot(run.t_s, _break_wraps(run.col("eta1_m")), lw=1.3, label=r"$\eta_1$")
     a1.set_ylabel(r"$\eta_1$ [m]")
     a2.plot(run.t_s, run.col("eta2_m_s"), lw=1.3, label=r"$\eta_2$")
     ref = run.col("speed_ref_m_s")

@@ -85,7 +85,13 @@ class ReplayReport:
     def lines(self) -> list[str]:
         out = [f"replayed {self.steps} controller steps ({self.profile}, {self.output_mode} setpoints), tolerance {self.tolerance:g}"]
         for label, d in (("setpoint", self.setpoint_max), ("step log", self.record_max)):
-            out.append(f"largest {label} difference: " + ("none compared" if d is None else d.describe()))
+            if d is None:
+                text = "nothing compared"
+            elif d.abs_diff == 0.0:
+                text = "0 (every compared value identical)"
+            else:
+                text = d.describe()
+            out.append(f"largest {label} difference: {text}")
         out.extend(f"problem: {p}" for p in self.problems[:10])
         if len(self.problems) > 10:
             out.append(f"... and {len(self.problems) - 10} more problems")

@@ -1,0 +1,349 @@
+"""In-process flight: the app's pure pipeline against the mock autopilot, in lockstep, no sockets.
+
+One fixed-step loop (period ``1 / rate_hz``; the mock's dynamics run at 1 kHz inside each step):
+
+1. the mock autopilot's due telemetry and replies are packed into MAVLink frames (sysid 1,
+   compid 1), logged to the ``.tlog``, decoded again and handed to the sim's bridge;
+2. on each fresh state sample the bridge steps :class:`pf_offboard.app.pipeline.Pipeline` — the
+   same code ``fly`` and ``replay`` run — and sends its setpoint: packed with our ids (the
+   vehicle's sysid, compid 191), logged, decoded (float32 as on the wire) and handed to the
+   mock (:class:`sitl_mock.autopilot.Autopilot`), which interprets it like PX4 or ArduPilot;
+3. the mock advances one step.
+
+So a ``sim`` flight writes the same ``.tlog`` / ``.csv`` a ``fly`` flight does, and ``replay``
+reproduces it. Frames: this module speaks MAVLink (NED) with the mock and ENU with the user; every
+conversion goes through :mod:`pf_offboard.frames`.
+
+The sim's bridge is deliberately small: stream setpoints, switch to OFFBOARD / GUIDED (after the
+throw trigger for a thrown start), follow until the duration or lap count is reached.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from pf_offboard import frames
+from pf_offboard.errors import InputError
+from pf_offboard.logs.flightlog import FlightLog, FlightLogPaths
+from pf_offboard.logs.steplog import StepRecord
+from pf_offboard.logs.summary import FlightSummary, summarize
+from pf_offboard.logs.tlog import OWN_COMPONENT_ID
+
+AUTOPILOT_SYSTEM_ID = 1
+AUTOPILOT_COMPONENT_ID = 1
+MAX_RATE_HZ = 250.0  # the mock streams at most this fast
+# Streams the controller needs, everything else switched off so logs stay small.
+# Attitude first: a LOCAL_POSITION_NED sample steps the controller with the attitude already in.
+_STATE_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
+_HEARTBEAT_HZ = 10.0  # like fly: a takeover shows within 0.1 s
+
+
+@dataclass(frozen=True)
+class SimSpec:
+    """One simulated flight. Positions / velocities are world ENU (z up), metres and m/s."""
+
+    start_enu_m: tuple[float, float, float] | None = None  # hover start (default: the path's start)
+    throw_enu: tuple[float, ...] | None = None  # x, y, z, vx, vy, vz: thrown start, motors locked
+    throw_height_m: float | None = None  # activation height of a throw (default: config, else 2 m)
+    autopilot: str = "px4"  # px4 | ardupilot (the mock's profile)
+    vehicle: str = "fast"  # fast | px4-default (sitl_mock.dynamics presets)
+    output_mode: str | None = None  # default: config flight.output_mode
+    rate_hz: float | None = None  # control / telemetry rate; default: config flight.setpoint_rate_hz
+    duration_s: float | None = None  # simulated time from the start
+    laps: float | None = None  # laps after activation
+    seed: int = 0
+    epoch_unix_s: float | None = None  # UNIX time of t = 0 in the .tlog (default: now)
+    name: str = "flight"  # log file stem
+
+
+@dataclass
+class SimResult:
+    """What a sim flight produced."""
+
+    paths: FlightLogPaths
+    records: list[StepRecord]
+    summary: FlightSummary
+    reason: str  # why it ended
+    activation_time_s: float | None
+    crashed: bool
+    sim_time_s: float
+    autopilot_log: list[str] = field(default_factory=list)
+
+
+def _vec(text: str, n: int, flag: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(flag, f"expected {n} comma-separated numbers, got {text!r}") from None
+    if len(values) != n:
+        raise InputError(flag, f"expected {n} comma-separated numbers, got {len(values)} in {text!r}")
+    if not all(math.isfinite(v) for v in values):
+        raise InputError(flag, f"values must be finite, got {text!r}")
+    return values
+
+
+def parse_start(text: str) -> tuple[float, float, float]:
+    """``x,y,z`` (ENU, m) of a hover start; z must be above the ground."""
+    v = _vec(text, 3, "--start")
+    if v[2] <= 0.2:
+        raise InputError("--start", f"z (up) must be > 0.2 m for a hover start, got {v[2]}")
+    return v  # type: ignore[return-value]
+
+
+def parse_throw(text: str) -> tuple[float, ...]:
+    """``x,y,z,vx,vy,vz`` (ENU, m and m/s) of a thrown start; z must be above the ground."""
+    v = _vec(text, 6, "--throw")
+    if v[2] <= 0.0:
+        raise InputError("--throw", f"z (up) must be > 0 m, got {v[2]}")
+    if math.hypot(*v[3:]) > 30.0:
+        raise InputError("--throw", f"speed {math.hypot(*v[3:]):.1f} m/s is beyond a throw (<= 30 m/s)")
+    return v
+
+
+def _check(spec: SimSpec) -> None:
+    if spec.autopilot not in ("px4", "ardupilot"):
+        raise InputError("--autopilot", f"must be px4 or ardupilot, got {spec.autopilot!r}")
+    from sitl_mock.dynamics import PRESET_NAMES
+
+    if spec.vehicle not in PRESET_NAMES:
+        raise InputError("--vehicle", f"must be one of {', '.join(PRESET_NAMES)}, got {spec.vehicle!r}")
+    if spec.start_enu_m is not None and spec.throw_enu is not None:
+        raise InputError("--throw", "give either --start (hover) or --throw, not both")
+    if spec.duration_s is not None and not (math.isfinite(spec.duration_s) and 0.0 < spec.duration_s <= 3600.0):
+        raise InputError("--duration", f"must be in (0, 3600] s, got {spec.duration_s}")
+    if spec.laps is not None and not (math.isfinite(spec.laps) and 0.0 < spec.laps <= 1000.0):
+        raise InputError("--laps", f"must be in (0, 1000], got {spec.laps}")
+    if spec.rate_hz is not None and not (math.isfinite(spec.rate_hz) and 20.0 <= spec.rate_hz <= MAX_RATE_HZ):
+        raise InputError("--rate", f"must be in [20, {MAX_RATE_HZ:g}] Hz, got {spec.rate_hz}")
+    if spec.throw_height_m is not None and not (math.isfinite(spec.throw_height_m) and spec.throw_height_m > 0.0):
+        raise InputError("--throw-height", f"must be > 0 m, got {spec.throw_height_m}")
+    if spec.epoch_unix_s is not None and not (math.isfinite(spec.epoch_unix_s) and 1e9 <= spec.epoch_unix_s <= 7e9):
+        raise InputError("--epoch", f"must be a UNIX time in seconds (1e9..7e9), got {spec.epoch_unix_s}")
+    if not spec.name or "/" in spec.name or spec.name.startswith("."):
+        raise InputError("--name", f"must be a plain file stem, got {spec.name!r}")
+
+
+class _Codec:
+    """Both ends of the in-process link: pack with the sender's ids, decode what was packed."""
+
+    def __init__(self, companion_system_id: int) -> None:
+        self.autopilot = mavlink.MAVLink(None, srcSystem=AUTOPILOT_SYSTEM_ID, srcComponent=AUTOPILOT_COMPONENT_ID)
+        self.companion = mavlink.MAVLink(None, srcSystem=companion_system_id, srcComponent=OWN_COMPONENT_ID)
+        self.parser = mavlink.MAVLink(None)
+
+    def pack(self, sender: Any, msg: Any) -> bytes:
+        frame = bytes(msg.pack(sender))
+        sender.seq = (sender.seq + 1) % 256
+        return frame
+
+    def decode(self, frame: bytes) -> Any:
+        return self.parser.decode(bytearray(frame))
+
+
+class SimFlight:
+    """One deterministic in-process flight (see the module docstring). Call :meth:`run` once."""
+
+    def __init__(self, config_path: str | Path, spec: SimSpec, out_dir: str | Path) -> None:
+        from pf_offboard.app.bridge import EndSpec, LapCounter, ThrowTrigger
+        from pf_offboard.app.encoders import Encoder
+        from pf_offboard.app.estimator import Estimator
+        from pf_offboard.app.fly import flight_settings
+        from pf_offboard.app.pipeline import Pipeline
+        from pf_offboard.app.profiles import PROFILES
+        from pf_offboard.config import load_config
+        from pf_offboard.control import PathFollower
+
+        _check(spec)
+        self.spec = spec
+        self.config_path = Path(config_path)
+        config = load_config(self.config_path)
+        settings = flight_settings(config, argparse.Namespace(output=spec.output_mode, end_action=None))
+        self.settings = settings
+        rate = spec.rate_hz if spec.rate_hz is not None else min(settings.setpoint_rate_hz, MAX_RATE_HZ)
+        if not 20.0 <= rate <= MAX_RATE_HZ:
+            raise InputError("flight.setpoint_rate_hz", f"sim needs 20..{MAX_RATE_HZ:g} Hz, got {rate} (or pass --rate)")
+        self.dt_s = 1.0 / rate
+        follower = PathFollower.from_config(config)
+        self.path = follower.path
+        self.profile = PROFILES[spec.autopilot]
+        encoder = Encoder(settings.output_mode, self.profile, AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID)
+        encoder.time_constant_s = settings.attitude_time_constant_s
+        self.pipeline = Pipeline(follower, encoder, Estimator("local_position"))
+        self.laps = LapCounter(self.path.length_m, self.path.closed)
+        self.end = EndSpec(laps=spec.laps, duration_s=None)
+        height = spec.throw_height_m or config.flight.throw_activation_height_m or 2.0
+        self.throw = ThrowTrigger(height) if spec.throw_enu is not None else None
+        self.duration_s = spec.duration_s if spec.duration_s is not None else (None if spec.laps else 20.0)
+        self.out_dir = Path(out_dir)
+        self.autopilot = self._make_autopilot(config)
+        self.codec = _Codec(AUTOPILOT_SYSTEM_ID)  # a companion shares its vehicle's system id
+        # bridge state
+        self.phase = "waiting" if self.throw is not None else "engaging"
+        self.activation_time_s: float | None = None
+        self._event = ""
+        self._mode_requested = False
+        self._inbox: deque[Any] = deque()
+        self.records: list[StepRecord] = []
+        self.reason = ""
+
+    def _make_autopilot(self, config: Any) -> Any:
+        from sitl_mock.autopilot import Autopilot
+        from sitl_mock.config import MockConfig, SpawnSpec
+
+        spec = self.spec
+        if spec.throw_enu is not None:
+            pos = frames.enu_to_ned(spec.throw_enu[:3])
+            vel = frames.enu_to_ned(spec.throw_enu[3:])
+            spawn = SpawnSpec("throw", tuple(map(float, pos)), tuple(map(float, vel)))  # type: ignore[arg-type]
+        else:
+            start = spec.start_enu_m if spec.start_enu_m is not None else tuple(map(float, self.path.eval(0.0).sigma))
+            if start[2] <= 0.2:
+                raise InputError("--start", f"the path starts at z = {start[2]:.2f} m; give --start above the ground")
+            spawn = SpawnSpec("hover", tuple(map(float, frames.enu_to_ned(start))))  # type: ignore[arg-type]
+        mock = MockConfig(
+            profile=spec.autopilot, vehicle=spec.vehicle, spawn=spawn, seed=spec.seed,
+            lockstep=True, lockstep_dt_s=self.dt_s, step_dt_s=self.dt_s, ekf_ready_delay_s=0.0,
+        )  # fmt: skip
+        ap = Autopilot(mock, np.random.default_rng(spec.seed))
+        ap.add_link(0)
+        return ap
+
+    # ------------------------------------------------------------------ the link, in process
+    def _send(self, log: FlightLog, msg: Any) -> None:
+        """Companion → autopilot: pack, log, decode, hand to the mock; queue its replies."""
+        frame = self.codec.pack(self.codec.companion, msg)
+        log.frame(frame, self._stamp())
+        for _, reply in self.autopilot.handle(self.codec.decode(frame), 0):
+            self._inbox.append(reply)
+
+    def _deliver(self, log: FlightLog) -> None:
+        """Autopilot → companion: everything queued, in order (replies may queue more)."""
+        while self._inbox:
+            frame = self.codec.pack(self.codec.autopilot, self._inbox.popleft())
+            log.frame(frame, self._stamp())
+            self._on_message(log, self.codec.decode(frame))
+
+    def _stamp(self) -> float:
+        return self._epoch + self.autopilot.time_s
+
+    def _command(self, log: FlightLog, command: int, *params: float) -> None:
+        p = list(params) + [0.0] * (7 - len(params))
+        self._send(log, mavlink.MAVLink_command_long_message(AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, command, 0, *p))
+
+    # ------------------------------------------------------------------ the sim's bridge
+    def _setup(self, log: FlightLog) -> None:
+        """Streams at the control rate (others off), hover thrust, ArduPilot GUID_OPTIONS."""
+        for msgid, _hz in self.autopilot.profile.streams:
+            if msgid != mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+                self._command(log, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msgid, -1)
+        for msgid in _STATE_STREAMS:
+            self._command(log, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msgid, self.dt_s * 1e6)
+        self._command(log, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_HEARTBEAT, 1e6 / _HEARTBEAT_HZ)
+        param = self.profile.hover_thrust_param.encode()
+        self._send(log, mavlink.MAVLink_param_request_read_message(AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, param, -1))
+        required = self.profile.required_guid_options(self.settings.output_mode)
+        if required:  # like `fly --set-guid-options`
+            self._send(log, mavlink.MAVLink_param_set_message(
+                AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, b"GUID_OPTIONS", float(required), mavlink.MAV_PARAM_TYPE_INT32))  # fmt: skip
+        self._deliver(log)
+
+    def _on_message(self, log: FlightLog, msg: Any) -> None:
+        kind = msg.get_type()
+        if kind == "PARAM_VALUE":
+            from pf_offboard.app.bridge import param_value_decode
+
+            pid = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
+            if pid.rstrip("\x00") == self.profile.hover_thrust_param and self.settings.hover_thrust is None:
+                value = param_value_decode(msg.param_value, msg.param_type, self.profile.name == "px4")
+                self.pipeline.encoder.hover_thrust = float(value)
+            return
+        if kind == "COMMAND_ACK":
+            if msg.command == mavlink.MAV_CMD_DO_SET_MODE and self._mode_requested and self.phase == "engaging":
+                if msg.result == mavlink.MAV_RESULT_ACCEPTED:
+                    self.phase = "following"
+                    self.activation_time_s = self.autopilot.time_s
+                    self._event = "activated"
+                else:
+                    self._mode_requested = False  # retried on the next step
+            return
+        if self.pipeline.on_message(msg):
+            self._on_state(log)
+
+    def _on_state(self, log: FlightLog) -> None:
+        est = self.pipeline.estimator.latest
+        assert est is not None
+        if self.phase == "waiting" and self.profile.name == "ardupilot":
+            # ArduPilot flies GUIDED setpoints at once (it unlocks the motors): stay silent
+            self.pipeline.mark_consumed()
+        else:
+            event, self._event = self._event, ""
+            step = self.pipeline.step(self.phase, self.phase != "waiting", event)
+            if step is None:
+                return
+            self.records.append(step.record)
+            log.step(step.record)
+            self._send(log, step.setpoint)
+            if self.phase == "following":
+                self.laps.update(step.record.eta1_m)
+        if self.phase == "waiting":
+            assert self.throw is not None
+            if self.throw.update(float(est.position_enu_m[2]), float(np.linalg.norm(est.velocity_enu_m_s))):
+                self.phase = "engaging"
+                self._event = f"throw trigger at {est.position_enu_m[2]:.2f} m"
+        if self.phase == "engaging" and not self._mode_requested:
+            self._mode_requested = True
+            req = self.profile.offboard
+            self._command(log, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, req.param2, req.param3)
+
+    def _end_reason(self) -> str:
+        t = self.autopilot.time_s
+        if self.duration_s is not None and t >= self.duration_s - 1e-9:
+            return f"duration {self.duration_s:g} s reached"
+        if self.end.laps is not None and self.laps.laps >= self.end.laps:
+            return f"{self.end.laps:g} laps done"
+        if self.autopilot.truth.crashed:
+            return "crashed"
+        if self.throw is not None and self.phase == "waiting" and self.autopilot.truth.landed and t > 0.5:
+            return "hit the ground before the throw trigger fired"
+        return ""
+
+    def run(self) -> SimResult:
+        spec = self.spec
+        self._epoch = spec.epoch_unix_s if spec.epoch_unix_s is not None else time.time()
+        max_steps = int(math.ceil((self.duration_s or 3600.0) / self.dt_s)) + 1
+        with FlightLog.open(self.out_dir, spec.name, config_path=self.config_path) as log:
+            self._setup(log)
+            for _ in range(max_steps):
+                self._inbox.extend(msg for _, msg in self.autopilot.due_telemetry())
+                self._deliver(log)
+                self.reason = self._end_reason()
+                if self.reason:
+                    break
+                self._inbox.extend(msg for _, msg in self.autopilot.step(self.dt_s))
+            else:
+                self.reason = "step limit reached"
+            paths = log.paths
+        return SimResult(
+            paths=paths,
+            records=self.records,
+            summary=summarize(self.records),
+            reason=self.reason,
+            activation_time_s=self.activation_time_s,
+            crashed=bool(self.autopilot.truth.crashed),
+            sim_time_s=self.autopilot.time_s,
+            autopilot_log=[f"{e.time_s:.3f} s: {e.text}" for e in self.autopilot.log],
+        )
+
+
+def simulate(config_path: str | Path, spec: SimSpec, out_dir: str | Path) -> SimResult:
+    """Fly one in-process flight and write its logs to ``out_dir`` (see :class:`SimFlight`)."""
+    return SimFlight(config_path, spec, out_dir).run()
