@@ -8,8 +8,9 @@ The hot loop is plain Python floats in local variables — a numpy call costs ab
 microsecond, the whole 1 kHz step has a budget of a few.
 
 Integration (per 1 ms substep): motors — exact zero-order-hold discretisation of the first-order
-lag; translation — velocity-Verlet with the acceleration of the substep (exact for constant
-acceleration, so free fall and ballistic flight carry no integrator energy drift); rotation —
+lag; translation — exact solution of dv/dt = u − c·(v − w) for the substep's thrust + gravity u
+and wind w (so free fall and ballistic flight, with or without drag, carry no integrator error
+beyond rounding); rotation —
 explicit midpoint (RK2) for Euler's equations and the exact rotation quaternion of the midpoint
 rate, renormalised at every attitude tick.
 """
@@ -134,6 +135,8 @@ class Simulator:
         if not isinstance(self._noise, SensorNoise):
             raise ValueError(f"Simulator.noise: expected SensorNoise, got {type(noise).__name__}")
         self._history: deque[VehicleState] = deque()
+        if self._noise.delay_s > 0.0:
+            self._history.append(self.state())
 
     # ------------------------------------------------------------------------------------------
     # Public API
@@ -517,10 +520,15 @@ class Simulator:
         pr = self.params
         dt = PHYSICS_DT_S
         hdt = 0.5 * dt
-        hdt2 = 0.5 * dt * dt
         g = GRAVITY_M_S2
         inv_m = 1.0 / pr.mass_kg
         cd = pr.drag_1_s
+        if cd > 0.0:
+            ed = math.exp(-cd * dt)
+            k1 = -math.expm1(-cd * dt) / cd  # (1 - e^{-c dt}) / c
+            k2 = (dt - k1) / cd
+        else:
+            ed, k1, k2 = 1.0, dt, 0.5 * dt * dt
         jx, jy, jz = pr.inertia_xx_kg_m2, pr.inertia_yy_kg_m2, pr.inertia_zz_kg_m2
         ijx, ijy, ijz = 1.0 / jx, 1.0 / jy, 1.0 / jz
         gx_, gy_, gz_ = (jy - jz) / jx, (jz - jx) / jy, (jx - jy) / jz  # gyroscopic coefficients
@@ -674,15 +682,23 @@ class Simulator:
             c2x = 2.0 * (qx * qz + qw * qy)
             c2y = 2.0 * (qy * qz - qw * qx)
             c2z = 1.0 - 2.0 * (qx * qx + qy * qy)
-            ax = -f * c2x - cd * (vx - wnx)
-            ay = -f * c2y - cd * (vy - wny)
-            az = g - f * c2z - cd * (vz - wnz)
-            px += vx * dt + ax * hdt2
-            py += vy * dt + ay * hdt2
-            pz += vz * dt + az * hdt2
-            vx += ax * dt
-            vy += ay * dt
-            vz += az * dt
+            # Translation: exact for thrust, gravity and wind constant over the substep, with
+            # linear drag on the air-relative velocity (dv/dt = u - c·(v - w)).
+            ux = -f * c2x
+            uy = -f * c2y
+            uz = g - f * c2z
+            rx_ = vx - wnx
+            ry_ = vy - wny
+            rz_ = vz - wnz
+            ax = ux - cd * rx_
+            ay = uy - cd * ry_
+            az = uz - cd * rz_
+            px += wnx * dt + rx_ * k1 + ux * k2
+            py += wny * dt + ry_ * k1 + uy * k2
+            pz += wnz * dt + rz_ * k1 + uz * k2
+            vx = wnx + rx_ * ed + ux * k1
+            vy = wny + ry_ * ed + uy * k1
+            vz = wnz + rz_ * ed + uz * k1
             # Euler's equations, explicit midpoint.
             dx = tqx * ijx + gx_ * wy * wz
             dy = tqy * ijy + gy_ * wz * wx
