@@ -24,9 +24,62 @@ def tangent_jet(s: tuple[float, ...]) -> Jet:
 def frenet_jets(s: tuple[float, ...]) -> tuple[Jet, Jet, Jet]:
     """Frenet-Serret ``(t, p, b)`` jets from sigma..sigma'''' (15 floats).
 
-    ``p`` is the unit of the component of sigma'' orthogonal to sigma' (same direction as t'),
-    ``b = t x p``. Second derivatives of ``p`` need sigma''''.
+    ``t = unit(sigma')``; ``p = unit(w)`` with ``w = sigma'' - <sigma'', t> t`` (the component of
+    sigma'' orthogonal to sigma', same direction as t'); ``b = t x p``. The rules are those of
+    :func:`unit_jet`, :func:`reject_jet` and :func:`cross_jet` (see :func:`frenet_jets_reference`),
+    fused into straight-line code because this runs every control step. p'' needs sigma''''.
     """
+    _, _, _, ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = s
+    # t = unit(sigma'): n' = <t, sigma''>, n'' = <t', sigma''> + <t, sigma'''>.
+    inv = 1.0 / math.sqrt(ax * ax + ay * ay + az * az)
+    tx, ty, tz = ax * inv, ay * inv, az * inv
+    n1 = tx * bx + ty * by + tz * bz
+    t1x, t1y, t1z = (bx - n1 * tx) * inv, (by - n1 * ty) * inv, (bz - n1 * tz) * inv
+    n2 = t1x * bx + t1y * by + t1z * bz + tx * cx + ty * cy + tz * cz
+    k = 2.0 * n1
+    t2x = (cx - n2 * tx - k * t1x) * inv
+    t2y = (cy - n2 * ty - k * t1y) * inv
+    t2z = (cz - n2 * tz - k * t1z) * inv
+    # w = sigma'' - c t: c = <sigma'', t> = n1, c' = n2, c'' = <sigma'''', t> + 2<sigma''', t'> + <sigma'', t''>.
+    c2 = dx * tx + dy * ty + dz * tz + 2.0 * (cx * t1x + cy * t1y + cz * t1z) + bx * t2x + by * t2y + bz * t2z
+    k = 2.0 * n2
+    wx, wy, wz = bx - n1 * tx, by - n1 * ty, bz - n1 * tz
+    w1x, w1y, w1z = cx - n2 * tx - n1 * t1x, cy - n2 * ty - n1 * t1y, cz - n2 * tz - n1 * t1z
+    w2x = dx - c2 * tx - k * t1x - n1 * t2x
+    w2y = dy - c2 * ty - k * t1y - n1 * t2y
+    w2z = dz - c2 * tz - k * t1z - n1 * t2z
+    # p = unit(w).
+    inv = 1.0 / math.sqrt(wx * wx + wy * wy + wz * wz)
+    px, py, pz = wx * inv, wy * inv, wz * inv
+    m1 = px * w1x + py * w1y + pz * w1z
+    p1x, p1y, p1z = (w1x - m1 * px) * inv, (w1y - m1 * py) * inv, (w1z - m1 * pz) * inv
+    m2 = p1x * w1x + p1y * w1y + p1z * w1z + px * w2x + py * w2y + pz * w2z
+    k = 2.0 * m1
+    p2x = (w2x - m2 * px - k * p1x) * inv
+    p2y = (w2y - m2 * py - k * p1y) * inv
+    p2z = (w2z - m2 * pz - k * p1z) * inv
+    # b = t x p and the product rule.
+    return (
+        ((tx, ty, tz), (t1x, t1y, t1z), (t2x, t2y, t2z)),
+        ((px, py, pz), (p1x, p1y, p1z), (p2x, p2y, p2z)),
+        (
+            (ty * pz - tz * py, tz * px - tx * pz, tx * py - ty * px),
+            (
+                t1y * pz - t1z * py + ty * p1z - tz * p1y,
+                t1z * px - t1x * pz + tz * p1x - tx * p1z,
+                t1x * py - t1y * px + tx * p1y - ty * p1x,
+            ),
+            (
+                t2y * pz - t2z * py + 2.0 * (t1y * p1z - t1z * p1y) + ty * p2z - tz * p2y,
+                t2z * px - t2x * pz + 2.0 * (t1z * p1x - t1x * p1z) + tz * p2x - tx * p2z,
+                t2x * py - t2y * px + 2.0 * (t1x * p1y - t1y * p1x) + tx * p2y - ty * p2x,
+            ),
+        ),
+    )
+
+
+def frenet_jets_reference(s: tuple[float, ...]) -> tuple[Jet, Jet, Jet]:
+    """:func:`frenet_jets` composed from the generic jet rules (slower; the tests compare both)."""
     t = tangent_jet(s)
     w = reject_jet(((s[6], s[7], s[8]), (s[9], s[10], s[11]), (s[12], s[13], s[14])), t)
     p = unit_jet(*w)

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pf_offboard.errors import InputError
+from pf_offboard.path._vec import Jet
 from pf_offboard.path.moving_frame import RotationMinimisingFrame, frenet_jets
 from pf_offboard.path.spline import QuinticSpline
 
@@ -141,6 +142,11 @@ class Path:
         self.frame_kind = frame
         self._rmf = RotationMinimisingFrame(sp, grid) if frame == "rmf" else None
         self._frame_cache: tuple[float, FrameDerivs] | None = None
+        # Single-entry caches of the fast float forms (NaN never equals itself: empty cache).
+        self._ev_lam = math.nan
+        self._ev_val: tuple[float, ...] = ()
+        self._fj_lam = math.nan
+        self._fj_val: tuple[Jet, Jet, Jet] | None = None
 
     @classmethod
     def from_waypoints(cls, points: ArrayLike, closed: bool = False, frame: str = "auto") -> Path:
@@ -169,8 +175,15 @@ class Path:
 
     # ------------------------------------------------------------------ geometry
     def eval_floats(self, lam: float) -> tuple[float, ...]:
-        """sigma..sigma'''' at ``lam`` as 15 floats (x, y, z per order); fast internal form."""
-        return self._spline.eval_floats(self._inrange(float(lam)))
+        """sigma..sigma'''' at ``lam`` as 15 floats (x, y, z per order); fast internal form.
+
+        The last result is cached (a control step asks for the same lambda several times).
+        """
+        if lam == self._ev_lam:
+            return self._ev_val
+        val = self._spline.eval_floats(self._inrange(float(lam)))
+        self._ev_lam, self._ev_val = lam, val
+        return val
 
     def eval(self, lam: float) -> PathPoint:
         """sigma(lam) (m, ENU) and d^k sigma / d lam^k, k = 1..4."""
@@ -184,13 +197,17 @@ class Path:
         cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
         return math.sqrt(cx * cx + cy * cy + cz * cz) / (ax * ax + ay * ay + az * az) ** 1.5
 
-    def frame_jets(self, lam: float):
-        """``(t, e2, e3)`` jets (value, d/dlam, d2/dlam2 as float 3-tuples); fast internal form."""
-        lam = self._inrange(float(lam))
-        s = self._spline.eval_floats(lam)
-        if self._rmf is None:
-            return frenet_jets(s)
-        return self._rmf.jets(s, lam)
+    def frame_jets(self, lam: float) -> tuple[Jet, Jet, Jet]:
+        """``(t, e2, e3)`` jets, each (value, d/dlam, d2/dlam2) as float 3-tuples; fast internal form.
+
+        The last result is cached (immutable tuples).
+        """
+        if lam == self._fj_lam:
+            return self._fj_val
+        s = self.eval_floats(lam)
+        val = frenet_jets(s) if self._rmf is None else self._rmf.jets(s, self._inrange(float(lam)))
+        self._fj_lam, self._fj_val = lam, val
+        return val
 
     def frame(self, lam: float) -> FrameDerivs:
         """Moving frame at ``lam`` with exact first and second lambda-derivatives."""

@@ -19,6 +19,10 @@ from numpy.typing import ArrayLike
 from pf_offboard.errors import InputError
 from pf_offboard.path.path import Path
 
+# Newton steps (parameter, ~m) smaller than this are accepted without another evaluation: the
+# remaining error is ~step^2 * |f''/f'|, i.e. < 1e-16 here.
+_ACCEPT = 1e-8
+
 
 class Projector:
     """Stateful lambda* tracker for one path.
@@ -37,7 +41,7 @@ class Projector:
         *,
         jump_m: float = 1.0,
         window_m: float = 0.5,
-        check_every: int = 25,
+        check_every: int = 128,
         reinit_margin_m: float = 1.0,
     ) -> None:
         self.path = path
@@ -52,6 +56,9 @@ class Projector:
         self._grid_list = grid.tolist()
         self._samples = path._spline.eval_vectorised(grid, 0)
         self._h = float(np.max(np.diff(path._grid)))
+        # Every 4th sample (<= 20 cm apart) for the periodic check: its distance is within
+        # 10 cm of the true one, far inside reinit_margin_m.
+        self._coarse = self._samples[::4].copy()
         self._eval2 = path._spline.eval2_floats
         self._closed = path.closed
         self._lam_max = path.lam_max
@@ -63,6 +70,7 @@ class Projector:
         self._lam: float | None = None
         self._y: tuple[float, float, float] | None = None
         self._count = 0
+        self._dlam = 0.0
         self.distance_m = math.nan
 
     @property
@@ -74,8 +82,10 @@ class Projector:
     def _newton(self, lam: float, lo: float, hi: float, x: float, y: float, z: float) -> tuple[float, float]:
         """Minimise |sigma - p|^2 / 2 over [lo, hi] from lam (unwrapped parameter).
 
-        Returns (lam, squared distance). Newton where the second derivative is positive, else a
-        gradient step; every step is confined to [lo, hi] and must not increase the distance.
+        Returns (lam, squared distance). Newton where the second derivative is safely positive, else
+        a gradient step; steps are confined to [lo, hi] and must not increase the distance (halving).
+        A Newton step below ``_ACCEPT`` is taken without re-evaluating: the error after it is of
+        order step^2, far below rounding.
         """
         ev = self._eval2
         closed = self._closed
@@ -88,27 +98,28 @@ class Projector:
             g = ax * rx + ay * ry + az * rz
             sp2 = ax * ax + ay * ay + az * az
             hess = sp2 + s[6] * rx + s[7] * ry + s[8] * rz
-            step = -g / hess if hess > 0.1 * sp2 else -g / sp2
-            new = lam + step
+            newton = hess > 0.1 * sp2
+            new = lam - g / hess if newton else lam - g / sp2
             if new < lo:
                 new = lo
             elif new > hi:
                 new = hi
-            if new == lam:
+            step = new - lam
+            if step == 0.0:
                 break
-            for _ in range(30):
+            if newton and -_ACCEPT < step < _ACCEPT:
+                lam = new
+                break
+            for _ in range(40):
                 s2 = ev(new % lmax if closed else new)
                 qx, qy, qz = s2[0] - x, s2[1] - y, s2[2] - z
                 e2 = qx * qx + qy * qy + qz * qz
-                if e2 <= d2 * (1.0 + 1e-14) + 1e-300:
+                if e2 <= d2 + 1e-13 * (d2 + 1e-9):
                     break
                 new = 0.5 * (lam + new)
             else:
-                break
-            done = abs(new - lam) <= 1e-12 * (1.0 + abs(lam))
+                break  # no descent found at all: lam is (numerically) the minimum
             lam, s, rx, ry, rz, d2 = new, s2, qx, qy, qz, e2
-            if done:
-                break
         return lam, d2
 
     def _global(self, x: float, y: float, z: float) -> tuple[float, float]:
@@ -150,22 +161,32 @@ class Projector:
         ):
             lam, d2 = self._global(x, y, z)
             self._count = 0
+            prev = lam
         else:
             w = self.window_m
             lo, hi = prev - w, prev + w
             if not self._closed:
                 lo = max(lo, 0.0)
                 hi = min(hi, self._lam_max)
-            lam, d2 = self._newton(prev, lo, hi, x, y, z)
+            # Start from a constant-rate prediction (the vehicle moves smoothly): one Newton
+            # evaluation fewer than starting at prev; the window stays centred on prev.
+            start = prev + self._dlam
+            if start < lo:
+                start = lo
+            elif start > hi:
+                start = hi
+            lam, d2 = self._newton(start, lo, hi, x, y, z)
             self._count += 1
             if self.check_every and self._count >= self.check_every:
                 self._count = 0
-                d = self._samples - np.array((x, y, z))
+                d = self._coarse - np.array((x, y, z))
                 g = math.sqrt(float(np.einsum("ij,ij->i", d, d).min()))
                 dl = math.sqrt(d2)
                 if dl > g + self.reinit_margin_m and dl > 2.0 * g:
                     lam, d2 = self._global(x, y, z)
-        if self._closed:
+                    prev = lam
+        self._dlam = lam - prev  # unwrapped increment (0 after a global search)
+        if self._closed and not 0.0 <= lam < self._lam_max:
             lam %= self._lam_max
             if lam >= self._lam_max:
                 lam = 0.0
