@@ -308,9 +308,7 @@ class Bridge:
             self.pipeline.mark_consumed()
             self._send(position_setpoint(self.link.target.system, self.link.target.component, time_boot_ms(est), self._takeoff_target, self._takeoff_yaw))
             return
-        if (phase in (Phase.WAITING, Phase.ENGAGING) and self._stream_follow_before_active) or (
-            phase is Phase.PREFLIGHT and self._neutral_allowed()
-        ):
+        if phase in (Phase.WAITING, Phase.ENGAGING) and self._stream_follow_before_active:
             # proof of life: the follower's own command, so the first active setpoint continues it
             # from the throw trigger / mode request on these setpoints take effect: mark them active
             step = self.pipeline.step(phase.value, phase is Phase.ENGAGING, self._pending_event())
@@ -518,13 +516,16 @@ class Bridge:
             return
         self._stream_follow_before_active = True
         if opts.launch == "airborne":
-            # proof of life for a second's worth of setpoints, then switch
-            await self._wait_until(lambda: self.pipeline.estimator.samples >= 2, opts.state_timeout_s * 4)
             if not is_armed(self.base_mode):
                 raise LinkError("--airborne: the vehicle is not armed (is it flying?)")
-            self.phase = Phase.WAITING
-            await self._proof_of_life()
-            self._engage("activated (airborne)")
+            if not self._neutral_allowed():
+                # already in OFFBOARD / GUIDED: whatever we send flies at once, so engage now
+                self._engage("activated (airborne, already in " + self.profile.offboard.name + ")")
+            else:
+                # stream the follower's setpoints (proof of life), then switch
+                self.phase = Phase.WAITING
+                await self._proof_of_life()
+                self._engage("activated (airborne)")
             await self.set_mode(self.profile.offboard, self.profile.offboard_custom_mode)
             if self.phase is Phase.ENGAGING:
                 self._activate()
@@ -532,7 +533,16 @@ class Bridge:
         # throw: stream the follower's setpoints while waiting; _on_state fires the trigger
         self.phase = Phase.WAITING
         self._print(f"waiting for a throw through {opts.height_m:g} m (Ctrl-C to abort)")
-        await self._wait_until(lambda: self.phase is not Phase.WAITING, math.inf)
+        armed_seen = is_armed(self.base_mode)
+
+        def waiting() -> bool:
+            nonlocal armed_seen
+            armed_seen = armed_seen or is_armed(self.base_mode)
+            return self.phase is Phase.WAITING and not (armed_seen and not is_armed(self.base_mode))
+
+        await self._wait_until(lambda: not waiting(), math.inf)
+        if self.phase is Phase.WAITING:
+            raise LinkError("the vehicle disarmed (landed or crashed) before crossing the activation height")
         if self.phase is Phase.ENGAGING:
             await self._command_confirmed(
                 f"mode {self.profile.offboard.name}",
