@@ -52,15 +52,33 @@ def encode(mav: mavlink.MAVLink, msg: mavlink.MAVLink_message) -> bytes:
     return bytes(data)
 
 
-class _Peer:
-    """One remote endpoint: its encoder/parser and how to write to it."""
+_MTU = 1400  # like PX4, pack several messages into one UDP datagram up to about this size
 
-    __slots__ = ("mav", "write", "link")
+
+class _Peer:
+    """One remote endpoint: its encoder/parser, an output buffer and how to write to it.
+
+    Messages produced in one step (or in reply to one datagram) are packed into as few
+    datagrams as possible, as PX4's MAVLink module does; :meth:`flush` sends them.
+    """
+
+    __slots__ = ("mav", "write", "link", "buffer")
 
     def __init__(self, link: int, write: Callable[[bytes], None]) -> None:
         self.mav = new_mavlink()
         self.write = write
         self.link = link
+        self.buffer = bytearray()
+
+    def queue(self, data: bytes) -> None:
+        if len(self.buffer) + len(data) > _MTU and self.buffer:
+            self.flush()
+        self.buffer += data
+
+    def flush(self) -> None:
+        if self.buffer:
+            self.write(bytes(self.buffer))
+            self.buffer.clear()
 
 
 class _UdpProtocol(asyncio.DatagramProtocol):
@@ -137,6 +155,7 @@ class MockAutopilot:
             self._truth_writer = csv.writer(self._truth_file)
             self._truth_writer.writerow(TRUTH_COLUMNS)
         self._emit(self.autopilot.due_telemetry())
+        self._flush()
         if cfg.lockstep:
             self._tasks.append(asyncio.create_task(self._keepalive()))
         else:
@@ -184,9 +203,11 @@ class MockAutopilot:
 
     def inject_takeover(self, mode: str | None = None) -> None:
         self._emit(self.autopilot.inject_takeover(mode))
+        self._flush()
 
     def inject_estimator_reset(self, delta_ned_m: tuple[float, float, float]) -> None:
         self._emit(self.autopilot.inject_estimator_reset(delta_ned_m))
+        self._flush()
 
     def inject_gust(self, velocity_ned_m_s: tuple[float, float, float], duration_s: float = 1.0) -> None:
         self.autopilot.inject_gust(velocity_ned_m_s, duration_s)
@@ -214,12 +235,14 @@ class MockAutopilot:
             target = sim0 + (loop.time() - wall0) * cfg.speed
             batch = 0
             while self.autopilot.time_s + dt <= target + 1e-9:
-                self._step(dt)
+                self._step(dt, flush=False)
                 batch += 1
                 if self._finished():
+                    self._flush()
                     return
                 if batch >= 50:  # let received messages in when the host cannot keep up
                     break
+            self._flush()  # one burst of datagrams per wake-up, packed up to the MTU
             now_wall = loop.time()
             next_wall = wall0 + (self.autopilot.time_s + dt - sim0) / cfg.speed
             await asyncio.sleep(max(0.0, next_wall - now_wall))
@@ -240,7 +263,8 @@ class MockAutopilot:
         for msgid in _KEEPALIVE_IDS:
             msg = self.autopilot.build(msgid)
             for peer in self._peers_of(None):
-                peer.write(encode(peer.mav, msg))  # not through the fault RNG: keeps runs deterministic
+                peer.queue(encode(peer.mav, msg))  # not through the fault RNG: keeps runs deterministic
+        self._flush()
 
     def _finished(self) -> bool:
         duration = self.config.duration_s
@@ -250,7 +274,7 @@ class MockAutopilot:
             return True
         return False
 
-    def _step(self, dt: float) -> None:
+    def _step(self, dt: float, flush: bool = True) -> None:
         ap = self.autopilot
         events = ap.step(dt)
         self.steps += 1
@@ -261,6 +285,14 @@ class MockAutopilot:
             self._flush_delayed()
         if self._truth_writer is not None:
             self._truth_writer.writerow(truth_row(ap))
+        if flush:
+            self._flush()
+
+    def _flush(self) -> None:
+        for peer in self._udp_peers.values():
+            peer.flush()
+        for peer in self._tcp_peers.values():
+            peer.flush()
 
     # ------------------------------------------------------------------------------------------
     # Sending
@@ -284,7 +316,7 @@ class MockAutopilot:
                 data = encode(peer.mav, msg)
                 for release, chunk in faults.outgoing(data, now):
                     if release <= now:
-                        peer.write(chunk)
+                        peer.queue(chunk)
                     else:
                         self._delay_seq += 1
                         heapq.heappush(self._delayed, (release, self._delay_seq, peer, chunk))
@@ -293,7 +325,7 @@ class MockAutopilot:
         now = self.autopilot.time_s
         while self._delayed and self._delayed[0][0] <= now:
             _, _, peer, chunk = heapq.heappop(self._delayed)
-            peer.write(chunk)
+            peer.queue(chunk)
 
     # ------------------------------------------------------------------------------------------
     # Receiving
@@ -363,7 +395,8 @@ class MockAutopilot:
             if lockstep and msg.get_msgId() in SETPOINT_IDS and not self._finished():
                 self._step(self.config.lockstep_dt_s)
                 if self._finished():
-                    return
+                    break
+        self._flush()
 
 
 TRUTH_COLUMNS = (
