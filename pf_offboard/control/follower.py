@@ -183,7 +183,9 @@ class PathFollower:
         if not self._closed and (lam <= 0.0 or lam >= self._lam_max):
             out = terms.tangential_offset_m if lam > 0.0 else -terms.tangential_offset_m
             if out > 0.0:
-                past_end = True
+                # beyond the end we travel towards: stop at the end point; beyond the start:
+                # join at the start and go on (the approach law keeps eta2_ref along t)
+                past_end = (lam > 0.0) == (self.speed > 0.0)
                 w = max(w, out / END_BLEND_M)
         w = 0.0 if w <= 0.0 else (1.0 if w >= 1.0 else w)
         law = self.law

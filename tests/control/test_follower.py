@@ -172,6 +172,20 @@ def test_open_path_stops_at_its_end(helix_frenet):
         assert all(np.all(np.isfinite(c.acceleration)) for c in cmds)
 
 
+def test_open_path_joined_before_its_start(helix_frenet):
+    """Starting beyond the start of an open path: join at the start and travel on."""
+    path = helix_frenet
+    for speed, lam in ((1.0, 0.0), (-1.0, path.lam_max)):
+        f = PathFollower(path, speed=speed)
+        t = path.frame(lam).t
+        y = path.eval(lam).sigma - np.sign(speed) * 0.8 * t
+        cmds, y, v = _fly(f, y, np.zeros(3), 6.0)
+        st = cmds[-1].state
+        assert abs(st.eta2 - speed) < 0.01 and cmds[-1].cross_track_m < 0.01
+        travelled = st.eta1 if speed > 0 else path.length_m - st.eta1
+        assert travelled > 3.0
+
+
 def test_far_start_bounded_and_limits_respected(paper_path):
     """100 m away at 10 m/s: commands stay within the limits, no NaN, heading back."""
     f = PathFollower(paper_path, speed=1.5)

@@ -131,3 +131,23 @@ def test_inverse_columns_closed_form():
         assert cols is not None
         assert np.allclose(b @ np.array(cols).T, np.eye(3), atol=1e-9)
     assert inverse_columns((1.0, 0.0, 0.0), (2.0, 0.0, 0.0), (0.0, 0.0, 1.0)) is None
+
+
+def test_paper_on_path_rate_is_not_exact_off_the_path(paper_path):
+    """The check above can fail: with the paper's dlam/dt = <t, v>/|sigma'| (exact only on the
+    path) xi2 of eq. (12) misses the finite-difference rate of xi1 off the path."""
+    rng = np.random.default_rng(99)
+    misses = 0
+    for _ in range(20):
+        y, v, a, lam0 = random_state(paper_path, rng)
+        lam = closest_lam(paper_path, y, lam0)
+        pt, fr = paper_path.eval(lam), paper_path.frame(lam)
+        r = y - pt.sigma
+        if np.linalg.norm(r) < 0.3:
+            continue
+        xi2_paper = (fr.t @ v) / np.linalg.norm(pt.d1) * (fr.de2 @ r) + fr.e2 @ v
+        fd = fd_derivative(paper_path, y, v, a, lam, 2e-4)[2]
+        exact = evaluate_terms(paper_path, lam, y, v).state.xi2
+        assert abs(fd - exact) <= 1e-6 * max(1.0, abs(exact))
+        misses += abs(fd - xi2_paper) > 1e-3
+    assert misses >= 5
