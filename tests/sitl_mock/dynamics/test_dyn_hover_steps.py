@@ -14,7 +14,7 @@ from sitl_mock.dynamics.identify import accel_step_rise_time_s, attitude_bandwid
 # The figures documented in docs/sitl-mock-dynamics.md ("Measured inner loops").
 DOCUMENTED_RISE_S = {
     ("fast", "vertical"): 0.015,
-    ("fast", "horizontal"): 0.018,
+    ("fast", "horizontal"): 0.0195,
     ("px4-default", "vertical"): 0.030,
     ("px4-default", "horizontal"): 0.150,
 }
