@@ -7,13 +7,12 @@ the path parameter lambda, as float tuples (see :mod:`pf_offboard.path._vec`).
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard.path._vec import Jet, cross_jet, reject_jet, unit_jet
-from pf_offboard.path.spline import QuinticSpline
+from pf_offboard.path.spline import QuinticSpline, flat_layout, horner2_xyz, interval
 
 
 def tangent_jet(s: tuple[float, ...]) -> Jet:
@@ -25,64 +24,10 @@ def frenet_jets(s: tuple[float, ...]) -> tuple[Jet, Jet, Jet]:
     """Frenet-Serret ``(t, p, b)`` jets from sigma..sigma'''' (15 floats).
 
     ``t = unit(sigma')``; ``p = unit(w)`` with ``w = sigma'' - <sigma'', t> t`` (the component of
-    sigma'' orthogonal to sigma', same direction as t'); ``b = t x p``. The rules are those of
-    :func:`unit_jet`, :func:`reject_jet` and :func:`cross_jet` (see :func:`frenet_jets_reference`),
-    fused into straight-line code because this runs every control step. p'' needs sigma''''.
+    sigma'' orthogonal to sigma', the direction of t'); ``b = t x p``. p'' needs sigma''''.
     """
-    _, _, _, ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = s
-    # t = unit(sigma'): n' = <t, sigma''>, n'' = <t', sigma''> + <t, sigma'''>.
-    inv = 1.0 / math.sqrt(ax * ax + ay * ay + az * az)
-    tx, ty, tz = ax * inv, ay * inv, az * inv
-    n1 = tx * bx + ty * by + tz * bz
-    t1x, t1y, t1z = (bx - n1 * tx) * inv, (by - n1 * ty) * inv, (bz - n1 * tz) * inv
-    n2 = t1x * bx + t1y * by + t1z * bz + tx * cx + ty * cy + tz * cz
-    k = 2.0 * n1
-    t2x = (cx - n2 * tx - k * t1x) * inv
-    t2y = (cy - n2 * ty - k * t1y) * inv
-    t2z = (cz - n2 * tz - k * t1z) * inv
-    # w = sigma'' - c t: c = <sigma'', t> = n1, c' = n2, c'' = <sigma'''', t> + 2<sigma''', t'> + <sigma'', t''>.
-    c2 = dx * tx + dy * ty + dz * tz + 2.0 * (cx * t1x + cy * t1y + cz * t1z) + bx * t2x + by * t2y + bz * t2z
-    k = 2.0 * n2
-    wx, wy, wz = bx - n1 * tx, by - n1 * ty, bz - n1 * tz
-    w1x, w1y, w1z = cx - n2 * tx - n1 * t1x, cy - n2 * ty - n1 * t1y, cz - n2 * tz - n1 * t1z
-    w2x = dx - c2 * tx - k * t1x - n1 * t2x
-    w2y = dy - c2 * ty - k * t1y - n1 * t2y
-    w2z = dz - c2 * tz - k * t1z - n1 * t2z
-    # p = unit(w).
-    inv = 1.0 / math.sqrt(wx * wx + wy * wy + wz * wz)
-    px, py, pz = wx * inv, wy * inv, wz * inv
-    m1 = px * w1x + py * w1y + pz * w1z
-    p1x, p1y, p1z = (w1x - m1 * px) * inv, (w1y - m1 * py) * inv, (w1z - m1 * pz) * inv
-    m2 = p1x * w1x + p1y * w1y + p1z * w1z + px * w2x + py * w2y + pz * w2z
-    k = 2.0 * m1
-    p2x = (w2x - m2 * px - k * p1x) * inv
-    p2y = (w2y - m2 * py - k * p1y) * inv
-    p2z = (w2z - m2 * pz - k * p1z) * inv
-    # b = t x p and the product rule.
-    return (
-        ((tx, ty, tz), (t1x, t1y, t1z), (t2x, t2y, t2z)),
-        ((px, py, pz), (p1x, p1y, p1z), (p2x, p2y, p2z)),
-        (
-            (ty * pz - tz * py, tz * px - tx * pz, tx * py - ty * px),
-            (
-                t1y * pz - t1z * py + ty * p1z - tz * p1y,
-                t1z * px - t1x * pz + tz * p1x - tx * p1z,
-                t1x * py - t1y * px + tx * p1y - ty * p1x,
-            ),
-            (
-                t2y * pz - t2z * py + 2.0 * (t1y * p1z - t1z * p1y) + ty * p2z - tz * p2y,
-                t2z * px - t2x * pz + 2.0 * (t1z * p1x - t1x * p1z) + tz * p2x - tx * p2z,
-                t2x * py - t2y * px + 2.0 * (t1x * p1y - t1y * p1x) + tx * p2y - ty * p2x,
-            ),
-        ),
-    )
-
-
-def frenet_jets_reference(s: tuple[float, ...]) -> tuple[Jet, Jet, Jet]:
-    """:func:`frenet_jets` composed from the generic jet rules (slower; the tests compare both)."""
     t = tangent_jet(s)
-    w = reject_jet(((s[6], s[7], s[8]), (s[9], s[10], s[11]), (s[12], s[13], s[14])), t)
-    p = unit_jet(*w)
+    p = unit_jet(*reject_jet(((s[6], s[7], s[8]), (s[9], s[10], s[11]), (s[12], s[13], s[14])), t))
     return t, p, cross_jet(t, p)
 
 
@@ -190,34 +135,15 @@ class RotationMinimisingFrame:
         coef = _hermite_quintic(np.diff(lam), e[:-1], e1[:-1], e2[:-1], e[1:], e1[1:], e2[1:])
         self._nodes = [float(v) for v in lam]
         self._nint = n - 1
-        # Per interval and axis: (a0..a5, first-derivative coefs 1..5 scaled, second 2..5 scaled).
-        flat = []
-        for i in range(n - 1):
-            per_axis = []
-            for ax in range(3):
-                a = [float(v) for v in coef[i, :, ax]]
-                per_axis.append(
-                    (
-                        *a,
-                        a[1], 2 * a[2], 3 * a[3], 4 * a[4], 5 * a[5],
-                        2 * a[2], 6 * a[3], 12 * a[4], 20 * a[5],
-                    )
-                )
-            flat.append(tuple(per_axis))
+        # Per interval and axis, the spline's flat layout for orders 0..2 (what horner2_xyz reads).
+        flat = [tuple(flat_layout(coef[i, :, ax].tolist(), 3) for ax in range(3)) for i in range(n - 1)]
         self._flat = flat
 
     def normal_jet(self, lam: float, t: Jet) -> Jet:
         """e2 jet at ``lam`` (in range) given the tangent jet there."""
-        i = bisect_right(self._nodes, lam) - 1
-        if i < 0:
-            i = 0
-        elif i >= self._nint:
-            i = self._nint - 1
-        v = lam - self._nodes[i]
-        hx = _h2(self._flat[i][0], v)
-        hy = _h2(self._flat[i][1], v)
-        hz = _h2(self._flat[i][2], v)
-        ehat = ((hx[0], hy[0], hz[0]), (hx[1], hy[1], hz[1]), (hx[2], hy[2], hz[2]))
+        i = interval(self._nodes, self._nint, lam)
+        h = horner2_xyz(self._flat[i], lam - self._nodes[i])
+        ehat = ((h[0], h[1], h[2]), (h[3], h[4], h[5]), (h[6], h[7], h[8]))
         return unit_jet(*reject_jet(ehat, t))
 
     def jets(self, s: tuple[float, ...], lam: float) -> tuple[Jet, Jet, Jet]:
@@ -226,11 +152,3 @@ class RotationMinimisingFrame:
         e2 = self.normal_jet(lam, t)
         return t, e2, cross_jet(t, e2)
 
-
-def _h2(c: tuple[float, ...], v: float) -> tuple[float, float, float]:
-    a0, a1, a2, a3, a4, a5, b0, b1, b2, b3, b4, c0, c1, c2, c3 = c
-    return (
-        a0 + v * (a1 + v * (a2 + v * (a3 + v * (a4 + v * a5)))),
-        b0 + v * (b1 + v * (b2 + v * (b3 + v * b4))),
-        c0 + v * (c1 + v * (c2 + v * c3)),
-    )

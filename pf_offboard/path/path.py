@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from pf_offboard.errors import InputError
 from pf_offboard.path._vec import Jet
 from pf_offboard.path.moving_frame import RotationMinimisingFrame, frenet_jets
-from pf_offboard.path.spline import QuinticSpline
+from pf_offboard.path.spline import QuinticSpline, interval
 
 # Frame choice for frame="auto": Frenet-Serret when the curvature sampled every <= 5 cm of
 # parameter stays at or above both an absolute floor and a fraction of its mean, else the
@@ -248,11 +248,7 @@ class Path:
     def arclength(self, lam: float) -> float:
         """eta1(lam) = integral_0^lam |sigma'| (m), of the wrapped (closed) / clamped (open) lam."""
         lam = self.wrap(lam)
-        i = bisect_right(self._grid_list, lam) - 1
-        if i < 0:
-            i = 0
-        elif i >= self._ngrid:
-            i = self._ngrid - 1
+        i = interval(self._grid_list, self._ngrid, lam)
         hh = self._half_h[i]
         x = (lam - self._grid_list[i]) / hh - 1.0
         v = 0.0

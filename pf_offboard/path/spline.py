@@ -14,14 +14,11 @@ segment between its points. Closed paths are periodic: C4 across the seam.
 from __future__ import annotations
 
 from bisect import bisect_right
+from math import perm
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import make_interp_spline
-
-# Taylor coefficients of derivative order d (d = 0..4) are stored pre-multiplied by the factors
-# k!/(k-d)! so that Horner needs no multiplications by constants at evaluation time.
-_ORDERS = 5
 
 
 class QuinticSpline:
@@ -31,7 +28,7 @@ class QuinticSpline:
     parameter is periodic with period ``lam_max`` and ``knots[-1] == lam_max``.
     """
 
-    __slots__ = ("knots", "lam_max", "closed", "_centres", "_coef", "_knot_list", "_nseg", "coef_array", "centres", "_flat")
+    __slots__ = ("knots", "lam_max", "closed", "_centres", "_knot_list", "_nseg", "coef_array", "centres", "_flat")
 
     def __init__(self, points: NDArray[np.float64], closed: bool) -> None:
         pts = np.asarray(points, dtype=float)
@@ -67,47 +64,17 @@ class QuinticSpline:
                 taylor[:, k, :] = bspl(centres, nu=k) / fact
         self.centres = centres
         self.coef_array = taylor
-        # Pre-multiplied coefficients for derivatives 0..4, per segment, as flat float tuples:
-        # for order d the polynomial in u = lam - centre is sum_j c[d][j] u^j, j = 0..5-d.
-        coef: list[tuple[tuple[float, ...], ...]] = []
-        for i in range(nseg):
-            per_axis = []
-            for ax in range(3):
-                a = [float(v) for v in taylor[i, :, ax]]
-                orders = []
-                for d in range(_ORDERS):
-                    c = []
-                    for j in range(6 - d):
-                        f = 1.0
-                        for m in range(j + 1, j + d + 1):
-                            f *= m
-                        c.append(a[j + d] * f)
-                    orders.append(tuple(c))
-                per_axis.append(tuple(orders))
-            coef.append(tuple(per_axis))
-        self._coef = coef
-        # One flat 20-tuple per segment and axis: orders 0..4 back to back (6+5+4+3+2 numbers).
-        self._flat = [tuple(tuple(v for order in axis for v in order) for axis in seg) for seg in coef]
+        # One flat 20-tuple per segment and axis (see flat_layout): orders 0..4 back to back.
+        self._flat = [
+            tuple(flat_layout(taylor[i, :, ax].tolist(), 5) for ax in range(3)) for i in range(nseg)
+        ]
         self._centres = [float(c) for c in centres]
         self._knot_list = [float(k) for k in knots]
         self._nseg = nseg
 
-    def segment(self, lam: float) -> int:
-        """Index of the knot interval containing ``lam`` (end intervals extend beyond the ends)."""
-        i = bisect_right(self._knot_list, lam) - 1
-        if i < 0:
-            return 0
-        if i >= self._nseg:
-            return self._nseg - 1
-        return i
-
     def eval_floats(self, lam: float) -> tuple[float, ...]:
         """sigma and derivatives 1..4 at ``lam`` (not wrapped): 15 floats, (x, y, z) per order."""
-        i = bisect_right(self._knot_list, lam) - 1
-        if i < 0:
-            i = 0
-        elif i >= self._nseg:
-            i = self._nseg - 1
+        i = interval(self._knot_list, self._nseg, lam)
         u = lam - self._centres[i]
         cx, cy, cz = self._flat[i]
         x = _horner4(cx, u)
@@ -117,17 +84,8 @@ class QuinticSpline:
 
     def eval2_floats(self, lam: float) -> tuple[float, ...]:
         """sigma, sigma', sigma'' at ``lam`` (not wrapped): 9 floats (projection hot path)."""
-        i = bisect_right(self._knot_list, lam) - 1
-        if i < 0:
-            i = 0
-        elif i >= self._nseg:
-            i = self._nseg - 1
-        u = lam - self._centres[i]
-        cx, cy, cz = self._flat[i]
-        x = _horner2(cx, u)
-        y = _horner2(cy, u)
-        z = _horner2(cz, u)
-        return (x[0], y[0], z[0], x[1], y[1], z[1], x[2], y[2], z[2])
+        i = interval(self._knot_list, self._nseg, lam)
+        return horner2_xyz(self._flat[i], lam - self._centres[i])
 
     def eval_vectorised(self, lam: NDArray[np.float64], nu: int = 0) -> NDArray[np.float64]:
         """sigma^(nu) at many (already wrapped / in-range) parameters, shape (n, 3). Build-time use."""
@@ -156,8 +114,30 @@ def _horner4(c: tuple[float, ...], u: float) -> tuple[float, float, float, float
     )
 
 
+def flat_layout(a: list[float], orders: int) -> tuple[float, ...]:
+    """Coefficients of a polynomial sum_k a[k] u^k and of its derivatives up to ``orders - 1``,
+    back to back: order d contributes a[j + d] (j + d)!/j!, j = 0..len(a)-1-d. Horner then needs no
+    multiplications by constants (for a quintic and orders = 5: 6 + 5 + 4 + 3 + 2 numbers)."""
+    return tuple(a[j + d] * perm(j + d, d) for d in range(orders) for j in range(len(a) - d))
+
+
+def interval(breaks: list[float], n: int, lam: float) -> int:
+    """Index of the interval [breaks[i], breaks[i+1]) holding lam; the end intervals extend
+    beyond the ends (``n`` = number of intervals)."""
+    i = bisect_right(breaks, lam) - 1
+    return 0 if i < 0 else (n - 1 if i >= n else i)
+
+
+def horner2_xyz(c: tuple[tuple[float, ...], ...], u: float) -> tuple[float, ...]:
+    """Orders 0..2 of three axes' flat tuples at u: (x, y, z, x', y', z', x'', y'', z'')."""
+    x = _horner2(c[0], u)
+    y = _horner2(c[1], u)
+    z = _horner2(c[2], u)
+    return (x[0], y[0], z[0], x[1], y[1], z[1], x[2], y[2], z[2])
+
+
 def _horner2(c: tuple[float, ...], u: float) -> tuple[float, float, float]:
-    """Orders 0..2 only (see :func:`_horner4`)."""
+    """Orders 0..2 only (see :func:`_horner4`); ``c`` may be the 15-long head of the layout."""
     p0, p1, p2, p3, p4, p5, q0, q1, q2, q3, q4, r0, r1, r2, r3 = c[:15]
     return (
         p0 + u * (p1 + u * (p2 + u * (p3 + u * (p4 + u * p5)))),

@@ -178,15 +178,6 @@ def test_frame_returns_fresh_equal_values(paper):
         a.e2[0] = 1.0  # cached frames are read-only
 
 
-def test_fused_frenet_equals_the_generic_rules(paper, helix):
-    from pf_offboard.path.moving_frame import frenet_jets, frenet_jets_reference
-
-    for path in (paper, helix):
-        for lam in np.linspace(0, path.lam_max, 50):
-            s = path.eval_floats(lam)
-            np.testing.assert_allclose(np.array(frenet_jets(s)), np.array(frenet_jets_reference(s)), atol=1e-13)
-
-
 def test_float_forms_match_array_forms(paper_rmf):
     for lam in (0.0, 1.7, paper_rmf.lam_max - 1e-3, paper_rmf.lam_max + 1.7):
         p = paper_rmf.eval(lam)
