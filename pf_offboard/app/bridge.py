@@ -240,6 +240,7 @@ class Bridge:
         self.loop_rate_hz = 0.0
         self.sent_setpoints = 0
         self._event = ""  # logged with the next step
+        self.last_statustext = ""
         # before activation, stream the follower's own (inactive) setpoints as proof of life
         self._stream_follow_before_active = False
 
@@ -264,7 +265,8 @@ class Bridge:
             return
         if kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
-            self._print(f"autopilot: {text.rstrip(chr(0))}")
+            self.last_statustext = text.rstrip("\x00")
+            self._print(f"autopilot: {self.last_statustext}")
             return
         if self.pipeline.on_message(msg):
             self._last_fresh_wall = self.clock()
@@ -409,19 +411,24 @@ class Bridge:
         return True
 
     async def _command_confirmed(self, what: str, send: Callable[[], None], confirmed: Callable[[], bool], command: int) -> None:
-        """Send, re-send every 0.5 s until ``confirmed()``; LinkError on refusal or timeout."""
+        """Send, re-send every 0.5 s until ``confirmed()``. COMMAND_ACK DENIED / UNSUPPORTED is a
+        refusal at once; TEMPORARILY_REJECTED / FAILED (e.g. "no position estimate yet") are
+        retried until ``command_timeout_s``. Raises LinkError naming the last ACK and autopilot text."""
         deadline = self.clock() + self.options.command_timeout_s
+        final = (mavlink2.MAV_RESULT_DENIED, mavlink2.MAV_RESULT_UNSUPPORTED)
         while True:
             send()
-            if await self._wait_until(lambda: confirmed() or self.acks.get(command, 0) not in (0, 5), 0.5):
-                if confirmed():
-                    return
-                result = self.acks.get(command)
-                raise LinkError(f"{what} refused by the autopilot (COMMAND_ACK result {result})")
+            await self._wait_until(lambda: confirmed() or self.acks.get(command) in final, 0.5)
+            if confirmed():
+                return
+            result = self.acks.get(command)
+            detail = f" (COMMAND_ACK result {result}{'; autopilot: ' + self.last_statustext if self.last_statustext else ''})"
+            if result in final:
+                raise LinkError(f"{what} refused by the autopilot{detail}")
             if self._stop.is_set() or self.phase in (Phase.TAKEN_OVER, Phase.FAILED):
                 raise LinkError(f"{what}: interrupted")
             if self.clock() > deadline:
-                raise LinkError(f"{what}: not confirmed within {self.options.command_timeout_s:g} s")
+                raise LinkError(f"{what}: not confirmed within {self.options.command_timeout_s:g} s{detail}")
 
     async def set_mode(self, mode: ModeRequest, custom_mode: int) -> None:
         await self._command_confirmed(
@@ -581,8 +588,10 @@ class Bridge:
                 await self.arm()
             self._takeoff_target = target
         else:
-            # ArduPilot: GUIDED, arm, MAV_CMD_NAV_TAKEOFF (it ignores position targets on the ground)
+            # ArduPilot: GUIDED, arm, MAV_CMD_NAV_TAKEOFF (it ignores position targets on the
+            # ground). Send nothing meanwhile: in GUIDED any setpoint would cancel the take-off.
             self.phase = Phase.TAKEOFF
+            self._last_setpoint = None
             await self.set_mode(self.profile.offboard, self.profile.offboard_custom_mode)
             if not is_armed(self.base_mode):
                 await self.arm()
