@@ -31,9 +31,20 @@ class FlightLogPaths:
 
     @classmethod
     def beside(cls, log_path: str | Path) -> FlightLogPaths:
-        """The sibling files of a ``.tlog`` or ``.csv`` (same directory and stem)."""
+        """The sibling files of a ``.tlog`` or ``.csv`` (same directory and stem); a gzipped
+        log (``x.tlog.gz``) has gzipped siblings (``x.csv.gz``) and a plain ``x.yaml``."""
         p = Path(log_path)
-        return cls(p.with_suffix(".tlog"), p.with_suffix(".csv"), p.with_suffix(".yaml"))
+        ext = ".gz" if p.name.endswith(".gz") else ""
+        stem = log_stem(p)
+        return cls(p.with_name(f"{stem}.tlog{ext}"), p.with_name(f"{stem}.csv{ext}"), p.with_name(f"{stem}.yaml"))
+
+
+def log_stem(path: str | Path) -> str:
+    """``flight`` for ``flight.tlog``, ``flight.csv``, ``flight.tlog.gz`` ..."""
+    name = Path(path).name
+    if name.endswith(".gz"):
+        name = name[:-3]
+    return name.rsplit(".", 1)[0] if "." in name else name
 
 
 class FlightLog:

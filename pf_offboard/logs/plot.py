@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard.errors import InputError
-from pf_offboard.logs.flightlog import FlightLogPaths
+from pf_offboard.logs.flightlog import FlightLogPaths, log_stem
 from pf_offboard.logs.steplog import StepRecord, column, read_steplog
 
 _DPI = 110
@@ -65,10 +65,14 @@ class Run:
 def load_run(path: str | Path) -> Run:
     """A run from a step-log CSV, or from a ``.tlog`` through its sibling CSV."""
     p = Path(path)
-    csv_path = FlightLogPaths.beside(p).steps_csv if p.suffix == ".tlog" else p
+    is_tlog = p.name.endswith((".tlog", ".tlog.gz"))
+    csv_path = FlightLogPaths.beside(p).steps_csv if is_tlog else p
     if not csv_path.exists():
         raise InputError(str(p), f"no step log {csv_path.name} beside it (plot reads the per-step CSV)")
-    return Run.from_records(p.stem if p.stem != "flight" else p.parent.name or p.stem, read_steplog(csv_path))
+    stem = log_stem(p)
+    # fly / sim name their logs "flight": the run is then known by its directory
+    name = p.resolve().parent.name if stem == "flight" and p.resolve().parent.name else stem
+    return Run.from_records(name, read_steplog(csv_path))
 
 
 def _start_label(run: Run) -> str:

@@ -8,6 +8,11 @@ field by field with the setpoint frame that flew; the step record (float64, from
 compared too. The largest differences are printed with the field and vehicle time; exit 1 when
 any exceeds the tolerance (default 1e-9), 0 otherwise, 2 for unreadable input.
 
+Float32 allowance: a setpoint field is a float32 rounding of a float64 result, so a 1e-16 change
+in the float64 value (another libm, another numpy) can move it by one float32 step (~1e-7 near
+1). One such step is allowed on setpoint float fields; beyond it the tolerance applies. The step
+log is compared in float64 with no allowance, so the 1e-9 check of the controller stays exact.
+
 How steps are found: the bridge sends each step's setpoint immediately after the state sample
 that triggered it, stamped with that sample's ``time_boot_ms``; rows of the step log carry the
 same time (``time_s``). Other setpoints in the ``.tlog`` (take-off position, hold, keep-alive
@@ -24,6 +29,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from pf_offboard.errors import InputError
 from pf_offboard.logs.flightlog import FlightLogPaths
@@ -46,6 +53,12 @@ class Difference:
     time_s: float
     recorded: float
     recomputed: float
+    allowance: float = 0.0  # float32 fields: one rounding step of the encoding is not a difference
+
+    @property
+    def excess(self) -> float:
+        """How far beyond the encoding allowance the difference goes (what the tolerance bounds)."""
+        return max(0.0, self.abs_diff - self.allowance)
 
     @property
     def abs_diff(self) -> float:
@@ -79,7 +92,7 @@ class ReplayReport:
 
     @property
     def ok(self) -> bool:
-        worst = max((d.abs_diff for d in (self.setpoint_max, self.record_max) if d is not None), default=0.0)
+        worst = max((d.excess for d in (self.setpoint_max, self.record_max) if d is not None), default=0.0)
         return not self.problems and worst <= self.tolerance and self.steps > 0
 
     def lines(self) -> list[str]:
@@ -89,6 +102,8 @@ class ReplayReport:
                 text = "nothing compared"
             elif d.abs_diff == 0.0:
                 text = "0 (every compared value identical)"
+            elif d.excess == 0.0:
+                text = d.describe() + ", within one float32 rounding step"
             else:
                 text = d.describe()
             out.append(f"largest {label} difference: {text}")
@@ -100,15 +115,25 @@ class ReplayReport:
 
 
 def _worse(a: Difference | None, b: Difference) -> Difference:
-    return b if a is None or b.abs_diff > a.abs_diff else a
+    if a is None:
+        return b
+    return b if (b.excess, b.abs_diff) > (a.excess, a.abs_diff) else a
 
 
-def _scalar_items(prefix: str, value: Any) -> list[tuple[str, float]]:
+def _f32_step(value: float) -> float:
+    """Spacing of float32 numbers at ``value``: what re-rounding a float64 result may change."""
+    if not math.isfinite(value):
+        return 0.0
+    return float(np.spacing(np.float32(abs(value))))
+
+
+def _scalar_items(prefix: str, value: Any) -> list[tuple[str, float, bool]]:
+    """(name, value, is_float) for a scalar or each element of an array field."""
     if isinstance(value, (list, tuple)):
-        return [(f"{prefix}[{i}]", float(v)) for i, v in enumerate(value)]
+        return [(f"{prefix}[{i}]", float(v), isinstance(v, float)) for i, v in enumerate(value)]
     if isinstance(value, (bytes, str)):
         return []
-    return [(prefix, float(value))]
+    return [(prefix, float(value), isinstance(value, float))]
 
 
 def compare_messages(recorded: Any, recomputed: Any, time_s: float) -> tuple[Difference | None, str | None]:
@@ -119,8 +144,9 @@ def compare_messages(recorded: Any, recomputed: Any, time_s: float) -> tuple[Dif
     for name in recorded.get_fieldnames():
         a = _scalar_items(name, getattr(recorded, name))
         b = _scalar_items(name, getattr(recomputed, name))
-        for (field, va), (_, vb) in zip(a, b):
-            worst = _worse(worst, Difference(f"{recorded.get_type()}.{field}", time_s, va, vb))
+        for (field, va, is_float), (_, vb, _) in zip(a, b):
+            allowance = _f32_step(va) if is_float else 0.0
+            worst = _worse(worst, Difference(f"{recorded.get_type()}.{field}", time_s, va, vb, allowance))
     return worst, None
 
 
@@ -130,7 +156,7 @@ def compare_records(recorded: StepRecord, recomputed: StepRecord) -> Difference 
     for f in dataclasses.fields(StepRecord):
         if f.name in _BRIDGE_FIELDS:
             continue
-        for (field, va), (_, vb) in zip(
+        for (field, va, _), (_, vb, _) in zip(
             _scalar_items(f.name, getattr(recorded, f.name)), _scalar_items(f.name, getattr(recomputed, f.name))
         ):
             worst = _worse(worst, Difference(field, recorded.time_s, va, vb))

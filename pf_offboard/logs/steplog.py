@@ -20,7 +20,7 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pf_offboard.logs.tlog import LogError
+from pf_offboard.logs.tlog import LogError, read_log_bytes
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -208,13 +208,12 @@ def read_steplog(path: str | Path) -> list[StepRecord]:
     """Read a step-log CSV written by :class:`StepLogWriter`.
 
     Raises :class:`LogError` naming the file, row (1-based, header is row 1) and column
-    on a missing/unknown header, a short or long row, or an unparsable cell.
+    on a missing/unknown header, a short or long row, or an unparsable cell. ``*.csv.gz`` is
+    read transparently.
     """
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise LogError(str(p), f"cannot read: {exc.strerror or exc}") from None
+        text = read_log_bytes(p).decode("utf-8")
     except UnicodeDecodeError as exc:
         raise LogError(f"{p} @ byte {exc.start}", "not UTF-8 text, not a step-log CSV") from None
     reader = csv.reader(text.splitlines())

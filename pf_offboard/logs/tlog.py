@@ -13,12 +13,15 @@ sysid 1 / compid 1 on PX4 and ArduPilot) is "in".
 
 The reader is strict: a truncated record, a bad start-of-frame byte, a length mismatch or a
 CRC failure raises :class:`LogError` naming the problem and the byte offset of the record.
+A ``.tlog.gz`` is read transparently (offsets then count decompressed bytes).
 """
 
 from __future__ import annotations
 
+import gzip
 import math
 import struct
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -117,6 +120,20 @@ class TlogWriter:
         self.close()
 
 
+def read_log_bytes(path: Path) -> bytes:
+    """A log file's bytes; ``*.gz`` files are decompressed (offsets then count decompressed bytes)."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise LogError(str(path), f"cannot read: {exc.strerror or exc}") from None
+    if path.name.endswith(".gz"):
+        try:
+            data = gzip.decompress(data)
+        except (OSError, EOFError, zlib.error) as exc:
+            raise LogError(str(path), f"not a valid gzip file: {exc}") from None
+    return data
+
+
 def _frame_length(data: bytes, start: int) -> int:
     """Total length of the MAVLink frame starting at ``data[start]`` (its first byte is valid)."""
     magic = data[start]
@@ -139,10 +156,7 @@ def iter_tlog(
     offset on the first corrupt or truncated record; raises it too if the file is missing.
     """
     p = Path(path)
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise LogError(str(p), f"cannot read: {exc.strerror or exc}") from None
+    data = read_log_bytes(p)
     if not data:
         raise LogError(str(p), "empty file, not a .tlog")
     mav = mavlink_dialect.MAVLink(None)

@@ -271,7 +271,7 @@ class SimFlight:
                 if msg.result == mavlink.MAV_RESULT_ACCEPTED:
                     self.phase = "following"
                     self.activation_time_s = self.autopilot.time_s
-                    self._event = "activated"
+                    self._event = f"{self._event}; activated" if self._event else "activated"
                 else:
                     self._mode_requested = False  # retried on the next step
             return
@@ -312,8 +312,8 @@ class SimFlight:
             return f"{self.end.laps:g} laps done"
         if self.autopilot.truth.crashed:
             return "crashed"
-        if self.throw is not None and self.phase == "waiting" and self.autopilot.truth.landed and t > 0.5:
-            return "hit the ground before the throw trigger fired"
+        if self.autopilot.truth.landed and t > 0.0:
+            return "on the ground before the throw trigger fired" if self.phase == "waiting" else "on the ground"
         return ""
 
     def run(self) -> SimResult:
