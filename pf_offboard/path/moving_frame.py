@@ -75,6 +75,33 @@ def _hermite_quintic(h: NDArray[np.float64], y0, d0, dd0, y1, d1, dd1) -> NDArra
     return np.stack([a0, a1, a2, a3, a4, a5], axis=1)
 
 
+def _double_reflection(pos: NDArray[np.float64], t: NDArray[np.float64], e0: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Transported normal at every node (Wang et al. 2008): reflect (e, t) in the bisector plane of
+    the chord, then in the plane that maps the reflected tangent onto the next tangent."""
+    v1 = np.diff(pos, axis=0)
+    k1 = 2.0 / np.sum(v1 * v1, axis=1)
+    t_l = t[:-1] - (k1 * np.sum(v1 * t[:-1], axis=1))[:, None] * v1
+    v2 = t[1:] - t_l
+    c2 = np.sum(v2 * v2, axis=1)
+    # c2 = 0: the tangent does not turn (straight piece), the second reflection is the identity.
+    k2 = np.where(c2 > 1e-30, 2.0 / np.where(c2 > 1e-30, c2, 1.0), 0.0)
+    rows = zip(v1.tolist(), k1.tolist(), v2.tolist(), k2.tolist(), t[1:].tolist())
+    ex, ey, ez = (float(v) for v in e0)
+    out = [(ex, ey, ez)]
+    for (ax, ay, az), ka, (bx, by, bz), kb, (tx, ty, tz) in rows:
+        f = ka * (ax * ex + ay * ey + az * ez)
+        ex, ey, ez = ex - f * ax, ey - f * ay, ez - f * az
+        f = kb * (bx * ex + by * ey + bz * ez)
+        ex, ey, ez = ex - f * bx, ey - f * by, ez - f * bz
+        # Remove the rounding drift off the normal plane and off unit length.
+        f = ex * tx + ey * ty + ez * tz
+        ex, ey, ez = ex - f * tx, ey - f * ty, ez - f * tz
+        f = 1.0 / math.sqrt(ex * ex + ey * ey + ez * ez)
+        ex, ey, ez = ex * f, ey * f, ez * f
+        out.append((ex, ey, ez))
+    return np.array(out)
+
+
 class RotationMinimisingFrame:
     """Rotation-minimising (parallel-transport) normal field e2 with exact derivatives.
 
@@ -96,20 +123,7 @@ class RotationMinimisingFrame:
         pos = spline.eval_vectorised(lam, 0)
         t, t1, t2 = _unit_rows(d1, d2, d3)
         n = len(lam)
-        e = np.empty((n, 3))
-        e[0] = initial_normal(t[0])
-        for j in range(n - 1):
-            # Double reflection: reflect (e, t) in the bisector plane of the chord, then in the plane
-            # that maps the reflected tangent onto the next tangent.
-            v1 = pos[j + 1] - pos[j]
-            c1 = float(v1 @ v1)
-            r_l = e[j] - (2.0 / c1) * float(v1 @ e[j]) * v1
-            t_l = t[j] - (2.0 / c1) * float(v1 @ t[j]) * v1
-            v2 = t[j + 1] - t_l
-            c2 = float(v2 @ v2)
-            r = r_l - (2.0 / c2) * float(v2 @ r_l) * v2 if c2 > 1e-30 else r_l
-            r -= float(r @ t[j + 1]) * t[j + 1]
-            e[j + 1] = r / np.linalg.norm(r)
+        e = _double_reflection(pos, t, initial_normal(t[0]))
         e1 = -_dot(e, t1) * t
         e2 = -_dot(e, t2) * t - _dot(e, t1) * t1
         self.twist_rate = 0.0
@@ -136,7 +150,7 @@ class RotationMinimisingFrame:
         self._nodes = [float(v) for v in lam]
         self._nint = n - 1
         # Per interval and axis, the spline's flat layout for orders 0..2 (what horner2_xyz reads).
-        flat = [tuple(flat_layout(coef[i, :, ax].tolist(), 3) for ax in range(3)) for i in range(n - 1)]
+        flat = list(zip(*(flat_layout(coef[:, :, ax], 3) for ax in range(3))))
         self._flat = flat
 
     def normal_jet(self, lam: float, t: Jet) -> Jet:

@@ -65,9 +65,7 @@ class QuinticSpline:
         self.centres = centres
         self.coef_array = taylor
         # One flat 20-tuple per segment and axis (see flat_layout): orders 0..4 back to back.
-        self._flat = [
-            tuple(flat_layout(taylor[i, :, ax].tolist(), 5) for ax in range(3)) for i in range(nseg)
-        ]
+        self._flat = list(zip(*(flat_layout(taylor[:, :, ax], 5) for ax in range(3))))
         self._centres = [float(c) for c in centres]
         self._knot_list = [float(k) for k in knots]
         self._nseg = nseg
@@ -114,11 +112,15 @@ def _horner4(c: tuple[float, ...], u: float) -> tuple[float, float, float, float
     )
 
 
-def flat_layout(a: list[float], orders: int) -> tuple[float, ...]:
-    """Coefficients of a polynomial sum_k a[k] u^k and of its derivatives up to ``orders - 1``,
-    back to back: order d contributes a[j + d] (j + d)!/j!, j = 0..len(a)-1-d. Horner then needs no
-    multiplications by constants (for a quintic and orders = 5: 6 + 5 + 4 + 3 + 2 numbers)."""
-    return tuple(a[j + d] * perm(j + d, d) for d in range(orders) for j in range(len(a) - d))
+def flat_layout(a: NDArray[np.float64], orders: int) -> list[tuple[float, ...]]:
+    """Per row of ``a`` (coefficients of sum_k a[k] u^k), the coefficients of the polynomial and of
+    its derivatives up to ``orders - 1``, back to back: order d contributes a[j + d] (j + d)!/j!,
+    j = 0..deg-d. Horner then needs no multiplications by constants (a quintic with orders = 5 gives
+    6 + 5 + 4 + 3 + 2 numbers)."""
+    n = a.shape[1]
+    src = [j + d for d in range(orders) for j in range(n - d)]
+    mult = np.array([perm(j + d, d) for d in range(orders) for j in range(n - d)], dtype=float)
+    return [tuple(row) for row in (a[:, src] * mult).tolist()]
 
 
 def interval(breaks: list[float], n: int, lam: float) -> int:
