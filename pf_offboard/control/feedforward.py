@@ -161,17 +161,20 @@ class YawProfile:
         self._coef = [tuple(spl.c[:, i].tolist()) for i in range(spl.c.shape[1])]
         self._nseg = len(self._coef)
         self._s_last = float(spl.x[-1])
-        # ends of an open table: hold the end values (zero slope beyond the table)
-        self._end_values = (float(spl(s[0])), float(spl(s[-1])))
+        # Beyond an open table's ends: continue linearly with the end slope. The natural spline has
+        # zero second derivative at its ends, so this extension keeps psi C2.
+        self._ends = (
+            (float(s[0]), float(spl(s[0])), float(spl(s[0], 1))),
+            (float(s[-1]), float(spl(s[-1])), float(spl(s[-1], 1))),
+        )
 
     def _table(self, eta1: float) -> tuple[float, float]:
         x = eta1
         if self.closed:
             x = self._s0 + (eta1 - self._s0) % self.length
-        elif x <= self._knots[0]:
-            return self._end_values[0], 0.0
-        elif x >= self._s_last:
-            return self._end_values[1], 0.0
+        elif x <= self._knots[0] or x >= self._s_last:
+            x0, p0, d0 = self._ends[0] if x <= self._knots[0] else self._ends[1]
+            return p0 + d0 * (x - x0), d0
         i = bisect_right(self._knots, x) - 1
         if i < 0:
             i = 0

@@ -125,7 +125,8 @@ class YawSpec:
     - ``constant``: ``yaw_rad``.
     - ``tangent``: heading of the direction of travel (``sign(speed) * t``) plus ``yaw_rad``.
     - ``table``: ``table_eta1_m_yaw_rad`` = ((eta1_m, yaw_rad), ...), interpolated by a C2 cubic
-      spline (periodic on closed paths, angles unwrapped).
+      spline (periodic on closed paths, angles unwrapped; natural on open paths, extended
+      linearly beyond the table).
     """
 
     mode: str = "constant"

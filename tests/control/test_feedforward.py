@@ -133,3 +133,15 @@ def test_tangent_yaw_faces_direction_of_travel():
     back = YawProfile(YawSpec.tangent(), path.length_m, True, -1.0).evaluate(0.0, t, (0.0, 0.0, 0.0))[0]
     assert fwd == pytest.approx(math.atan2(t[1], t[0]))
     assert math.remainder(back - fwd - math.pi, 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_open_yaw_table_is_c2_beyond_its_ends():
+    table = ((1.0, 0.0), (3.0, 1.0), (6.0, -0.5))
+    prof = YawProfile(YawSpec.table(table), path_length_m=10.0, closed=False, direction=1.0)
+    t, z = (1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    for end in (1.0, 6.0):
+        h = 1e-4
+        (pa, da), (pb, db) = prof.evaluate(end - h, t, z), prof.evaluate(end + h, t, z)
+        assert pb - pa == pytest.approx(2 * h * da, rel=1e-3)  # value and slope continuous
+        assert db == pytest.approx(da, abs=1e-6)  # slope continuous -> psi_dot has no step
+    assert prof.evaluate(0.0, t, z)[1] == pytest.approx(prof.evaluate(1.0, t, z)[1])
