@@ -99,6 +99,8 @@ class Path:
     """Reference path sigma: [0, lam_max] -> R^3 (ENU, m). Build with :meth:`from_waypoints`."""
 
     def __init__(self, waypoints: NDArray[np.float64], closed: bool, frame: str) -> None:
+        waypoints = np.array(waypoints, dtype=float)
+        waypoints.flags.writeable = False  # the spline was built from them
         self.waypoints = waypoints
         self.closed = bool(closed)
         self._spline = sp = QuinticSpline(waypoints, self.closed)

@@ -44,6 +44,11 @@ class Projector:
         check_every: int = 128,
         reinit_margin_m: float = 1.0,
     ) -> None:
+        for name, value in (("jump_m", jump_m), ("window_m", window_m), ("reinit_margin_m", reinit_margin_m)):
+            if not (math.isfinite(value) and value > 0.0):
+                raise InputError(f"projector.{name}", f"must be a positive number of metres, got {value!r}")
+        if check_every < 0:
+            raise InputError("projector.check_every", f"must be >= 0 (0 disables the check), got {check_every!r}")
         self.path = path
         self.jump_m = float(jump_m)
         self.window_m = float(window_m)

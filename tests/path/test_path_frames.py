@@ -185,3 +185,15 @@ def test_float_forms_match_array_forms(paper_rmf):
         (t, t1, t2), (e, e1, e2), (b, b1, b2) = paper_rmf.frame_jets(lam)
         f = paper_rmf.frame(lam)
         np.testing.assert_array_equal(np.array([t, e, b, t1, e1, b1, t2, e2, b2]), np.array(f))
+
+
+@pytest.mark.parametrize("name", ["paper_rmf", "helix_rmf"])
+def test_rmf_is_c2_across_its_interpolation_nodes(name, request):
+    # e2 between nodes is a Hermite interpolant: value, first and second derivative must match
+    # from both sides of every node (the control law differentiates them).
+    path = request.getfixturevalue(name)
+    nodes = np.array(path._rmf._nodes[1:-1])
+    for node in nodes[:: max(1, len(nodes) // 40)]:
+        a, b = path.frame(node - 1e-9), path.frame(node + 1e-9)
+        for field in a._fields:
+            assert rel_err(getattr(a, field), getattr(b, field)) < 1e-6, (node, field)

@@ -233,3 +233,14 @@ def test_accepts_lists_and_tuples(paper):
     y = paper.eval(3.0).sigma
     assert proj.update(list(y)) == pytest.approx(3.0, abs=1e-9)
     assert proj.update(tuple(y)) == pytest.approx(3.0, abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    "kw, field",
+    [({"window_m": 0.0}, "projector.window_m"), ({"jump_m": np.nan}, "projector.jump_m"),
+     ({"check_every": -1}, "projector.check_every"), ({"reinit_margin_m": -1.0}, "projector.reinit_margin_m")],
+)
+def test_bad_projector_settings(paper, kw, field):
+    with pytest.raises(InputError) as exc:
+        Projector(paper, **kw)
+    assert exc.value.field == field

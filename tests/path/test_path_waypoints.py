@@ -77,3 +77,5 @@ def test_waypoints_are_copied():
     path = Path.from_waypoints(pts)
     pts[0, 0] = 99.0
     assert path.waypoints[0, 0] == 0.0
+    with pytest.raises(ValueError):
+        path.waypoints[0, 0] = 1.0  # read-only
