@@ -98,15 +98,17 @@ def test_attractive_from_200_random_starts_with_limits(paper_path):
 
 
 @pytest.mark.parametrize("speed", [1.5, -1.5])
-def test_self_intersection_eta1_monotonic(paper_path, speed):
+@pytest.mark.parametrize("name", ["paper.yaml", "figure8.yaml"])
+def test_self_intersection_eta1_monotonic(name, speed):
     """Two laps through the self-intersection: eta1 advances every step by eta2_ref dt (no branch jump)."""
-    f = PathFollower(paper_path, speed=speed)
-    y = paper_path.eval(0.0).sigma.copy()
-    v = speed * paper_path.frame(0.0).t
+    path = PathFollower.from_config(config_path(name)).path
+    f = PathFollower(path, speed=speed)
+    y = path.eval(0.0).sigma.copy()
+    v = speed * path.frame(0.0).t
     dt = 0.005
     y, v, cmd = rk4_step(f, y, v, dt)
     prev = cmd.state.eta1
-    L = paper_path.length_m
+    L = path.length_m
     n = int(2 * L / abs(speed) / dt)
     for _ in range(n):
         y, v, cmd = rk4_step(f, y, v, dt)
