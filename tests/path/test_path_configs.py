@@ -96,14 +96,14 @@ def test_exactly_one_self_intersection(name, request):
     near_a = np.minimum(_param_gap(path, a, ca), _param_gap(path, a, cb))
     near_b = np.minimum(_param_gap(path, b, ca), _param_gap(path, b, cb))
     assert np.all(np.maximum(near_a, near_b) < 0.5)
-    # Away from the crossing the path keeps >= 0.5 m clearance from itself (no second crossing,
+    # Away from the crossing the path keeps >= 0.8 m clearance from itself (no second crossing,
     # no near-miss that could confuse the projection).
     lam, pts = _samples(path, 1500)
     d = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=2)
     gap = _param_gap(path, lam[:, None], lam[None, :])
     near_c = np.minimum(_param_gap(path, lam, ca), _param_gap(path, lam, cb)) < 1.0
     mask = (gap > 1.5) & ~(near_c[:, None] & near_c[None, :])
-    assert d[mask].min() > 0.5
+    assert d[mask].min() > 0.8  # paper 0.85 m, figure8 0.94 m (docs/paths.md)
 
 
 def test_helix_and_straight(helix, straight):
