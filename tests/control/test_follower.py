@@ -241,3 +241,34 @@ def test_value_objects_and_reset(paper_path):
         Gains(transversal_bandwidth_hz=0.0)
     with pytest.raises(InputError):
         Limits(max_tilt_deg=90.0)
+
+
+@pytest.mark.parametrize("name", ["figure8.yaml", "racetrack.yaml", "helix.yaml", "straight.yaml"])
+def test_attractive_on_the_other_shipped_paths(name):
+    """20 random starts (<= 5 m, <= 4 m/s) per shipped path, both directions, rmf and open paths."""
+    base = PathFollower.from_config(config_path(name))
+    path = base.path
+    rng = np.random.default_rng(sum(map(ord, name)))
+    dt = 0.005
+    for i in range(20):
+        speed = base.speed if i % 2 else -base.speed
+        f = PathFollower(path, speed=speed, limits=base.limits)
+        lam = rng.uniform(0.2, 0.6) * path.lam_max  # open paths: leave room before the end
+        d = rng.normal(size=3)
+        y = path.eval(lam).sigma + d / np.linalg.norm(d) * rng.uniform(0.0, 5.0)
+        w = rng.normal(size=3)
+        v = w / np.linalg.norm(w) * rng.uniform(0.0, 4.0)
+        converged_at = None
+        for k in range(int(15.0 / dt)):
+            c = f.update(y, v)
+            assert feasible(f.limits, c.acceleration)
+            st = c.state
+            if math.hypot(st.xi1, st.phi1) < 0.01 and abs(st.eta2 - f.reference_speed(st.eta1)) < 0.01:
+                converged_at = k * dt if converged_at is None else converged_at
+            else:
+                converged_at = None
+            if converged_at is not None and k * dt > converged_at + 0.5:
+                break
+            v = v + dt * c.acceleration
+            y = y + dt * v
+        assert converged_at is not None, (name, i, st)
