@@ -270,7 +270,6 @@ class SimFlight:
             if msg.command == mavlink.MAV_CMD_DO_SET_MODE and self._mode_requested and self.phase == "engaging":
                 if msg.result == mavlink.MAV_RESULT_ACCEPTED:
                     self.phase = "following"
-                    self.activation_time_s = self.autopilot.time_s
                     self._event = f"{self._event}; activated" if self._event else "activated"
                 else:
                     self._mode_requested = False  # retried on the next step
@@ -289,6 +288,8 @@ class SimFlight:
             step = self.pipeline.step(self.phase, self.phase != "waiting", event)
             if step is None:
                 return
+            if self.phase != "waiting" and self.activation_time_s is None:
+                self.activation_time_s = est.time_s  # the first setpoint meant to fly
             self.records.append(step.record)
             log.step(step.record)
             self._send(log, step.setpoint)
