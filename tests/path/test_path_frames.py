@@ -197,3 +197,30 @@ def test_rmf_is_c2_across_its_interpolation_nodes(name, request):
         a, b = path.frame(node - 1e-9), path.frame(node + 1e-9)
         for field in a._fields:
             assert rel_err(getattr(a, field), getattr(b, field)) < 1e-6, (node, field)
+
+
+def test_rmf_matches_an_independent_parallel_transport_integration(helix_rmf):
+    # Integrate e' = -<e, t'> t with an adaptive ODE solver from the same start vector and
+    # compare along the open helix (no closing twist on open paths).
+    from scipy.integrate import solve_ivp
+
+    def rhs(lam, e):
+        f = helix_rmf.frame(lam)
+        return -np.dot(e, f.dt) * f.t
+
+    e0 = helix_rmf.frame(0.0).e2
+    lams = np.linspace(0.0, helix_rmf.lam_max, 25)
+    sol = solve_ivp(rhs, (0.0, helix_rmf.lam_max), e0, t_eval=lams, rtol=1e-11, atol=1e-12, method="DOP853")
+    for lam, e_ref in zip(sol.t, sol.y.T):
+        assert np.linalg.norm(helix_rmf.frame(lam).e2 - e_ref / np.linalg.norm(e_ref)) < 1e-7, lam
+
+
+@pytest.mark.parametrize("radius, kind", [(8.0, "frenet"), (12.0, "rmf")])
+def test_auto_threshold_is_the_documented_one(radius, kind):
+    # A circle has constant curvature 1/r: frenet iff 1/r >= 0.1 1/m (AUTO_FRENET_MIN_KAPPA_1_M).
+    th = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    pts = np.c_[radius * np.cos(th), radius * np.sin(th), np.zeros_like(th)]
+    assert Path.from_waypoints(pts, closed=True).frame_kind == kind
+    # Both can be forced (the curvature is far from zero).
+    assert Path.from_waypoints(pts, closed=True, frame="frenet").frame_kind == "frenet"
+    assert Path.from_waypoints(pts, closed=True, frame="rmf").frame_kind == "rmf"

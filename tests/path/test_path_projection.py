@@ -244,3 +244,16 @@ def test_bad_projector_settings(paper, kw, field):
     with pytest.raises(InputError) as exc:
         Projector(paper, **kw)
     assert exc.value.field == field
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_random_paths_fresh_projection_is_global(seed):
+    rng = np.random.default_rng(seed)
+    pts = np.cumsum(rng.uniform(-1.0, 1.0, size=(8, 3)) + np.array([1.0, 0.3, 0.0]), axis=0)
+    path = Path.from_waypoints(pts, closed=False, frame="rmf")
+    proj = Projector(path)
+    for y in near_points(path, rng, 10, 1.5):
+        proj.reset()
+        lam = proj.update(y)
+        _, d_ref = brute_force(path, y)
+        assert dist(path, lam, y) <= d_ref + 1e-9
