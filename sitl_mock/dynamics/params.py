@@ -83,6 +83,9 @@ class VehicleParams:
     roll_pitch: CascadeGains
     yaw: CascadeGains
     airmode: bool  # mixer may raise the collective thrust to keep roll/pitch authority
+    # Collective-thrust lead against the motors' present thrust (motor-speed feedback): the
+    # collective's effective lag becomes motor_time_constant_s / (1 + thrust_lead). 0: plain lag.
+    thrust_lead: float
     attitude_loop_hz: float  # attitude controller rate (rate loop and physics run at 1 kHz)
     tilt_max_rad: float  # acceleration mode tilt limit (MPC_TILTMAX_AIR)
     thrust_min_norm: float  # acceleration mode thrust floor (MPC_THR_MIN)
@@ -124,8 +127,8 @@ class VehicleParams:
             raise ValueError("VehicleParams.thrust_min_norm/thrust_max_norm: need 0 <= min < max <= 1")
         if self.tilt_max_rad >= math.pi / 2:
             raise ValueError(f"VehicleParams.tilt_max_rad: must be < pi/2, got {self.tilt_max_rad!r}")
-        if self.drag_1_s < 0.0 or self.ground_friction < 0.0:
-            raise ValueError("VehicleParams.drag_1_s/ground_friction: must be >= 0")
+        if self.drag_1_s < 0.0 or self.ground_friction < 0.0 or self.thrust_lead < 0.0:
+            raise ValueError("VehicleParams.drag_1_s/ground_friction/thrust_lead: must be >= 0")
         if 1000.0 % self.attitude_loop_hz > 1e-9 or self.attitude_loop_hz > 1000.0:
             raise ValueError(
                 f"VehicleParams.attitude_loop_hz: must divide 1000 (physics rate), got {self.attitude_loop_hz!r}"
@@ -170,6 +173,7 @@ def _fast() -> VehicleParams:
         yaw=cascade_gains_for_poles(60.0, tau, rate_limit_rad_s=6.0, rate_i_fraction=0.5,
                                     attitude_accel_max_rad_s2=20.0),
         airmode=False,
+        thrust_lead=0.0,
         attitude_loop_hz=250.0,
         tilt_max_rad=math.radians(60.0),
         thrust_min_norm=0.05,
@@ -210,6 +214,7 @@ def _px4_default() -> VehicleParams:
             rate_d=0.0, rate_limit_rad_s=math.radians(200.0),
         ),
         airmode=False,
+        thrust_lead=0.0,
         attitude_loop_hz=250.0,
         tilt_max_rad=math.radians(45.0),
         thrust_min_norm=0.12,

@@ -551,6 +551,7 @@ class Simulator:
         ily = 0.2 * half / kiy if kiy > 0 else 0.0
         ilz = 0.2 * half / kiz if kiz > 0 else 0.0
         am = self._alpha_motor
+        lead_c = pr.thrust_lead
         crash_speed = pr.crash_speed_m_s
         mu = pr.ground_friction
         on = self._motors_on
@@ -638,7 +639,8 @@ class Simulator:
                     mm = half
                 # Roll/pitch first: the collective may drop to make room at the top; at the bottom
                 # it rises (airmode) or roll/pitch shrink (PX4 default, airmode off).
-                c = cc
+                # Collective, led against the motors' present mean thrust like the torques.
+                c = cc + lead_c * (cc - 0.25 * (t0 + t1 + t2 + t3))
                 if c > tmax - mm:
                     c = tmax - mm
                 if c < tmin + mm and airmode:
