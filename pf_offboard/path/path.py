@@ -7,7 +7,6 @@ World frame ENU, metres. The parameter lambda is the cumulative chord length of 
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
 from typing import NamedTuple
 
 import numpy as np
@@ -247,33 +246,33 @@ class Path:
         self._arc_coef = [tuple(row[::-1].tolist()) for row in ic]  # highest power first (Horner)
         self._half_h = (0.5 * h).tolist()
 
-    def arclength(self, lam: float) -> float:
-        """eta1(lam) = integral_0^lam |sigma'| (m), of the wrapped (closed) / clamped (open) lam."""
-        lam = self.wrap(lam)
-        i = interval(self._grid_list, self._ngrid, lam)
-        hh = self._half_h[i]
-        x = (lam - self._grid_list[i]) / hh - 1.0
+    def _arc_in(self, i: int, lam: float) -> float:
+        # Arclength from grid interval i's polynomial (also valid slightly outside the interval).
+        x = (lam - self._grid_list[i]) / self._half_h[i] - 1.0
         v = 0.0
         for c in self._arc_coef[i]:
             v = v * x + c
         return self._cum[i] + v
 
+    def arclength(self, lam: float) -> float:
+        """eta1(lam) = integral_0^lam |sigma'| (m), of the wrapped (closed) / clamped (open) lam."""
+        lam = self.wrap(lam)
+        return self._arc_in(interval(self._grid_list, self._ngrid, lam), lam)
+
     def lam_at_arclength(self, s_m: float) -> float:
-        """Inverse of :meth:`arclength` (Newton, 1e-12 m). Closed: s wraps; open: clamped."""
+        """Inverse of :meth:`arclength` (Newton to 1e-13). Closed: s wraps; open: clamped."""
         s = float(s_m)
         if self.closed:
             s %= self.length_m
         else:
             s = min(max(s, 0.0), self.length_m)
-        i = bisect_right(self._cum, s) - 1
-        i = min(max(i, 0), self._ngrid - 1)
+        i = interval(self._cum, self._ngrid, s)
         c0, c1 = self._cum[i], self._cum[i + 1]
         g0, g1 = self._grid_list[i], self._grid_list[i + 1]
         lam = g0 + (g1 - g0) * (s - c0) / (c1 - c0)
         for _ in range(8):
             d = self._spline.eval2_floats(lam)
-            speed = math.sqrt(d[3] * d[3] + d[4] * d[4] + d[5] * d[5])
-            step = (self.arclength(lam) - s) / speed
+            step = (self._arc_in(i, lam) - s) / math.sqrt(d[3] * d[3] + d[4] * d[4] + d[5] * d[5])
             lam -= step
             if abs(step) < 1e-13 * (1.0 + abs(lam)):
                 break

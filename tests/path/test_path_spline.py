@@ -168,3 +168,14 @@ def test_wrap(paper, helix):
     assert helix.wrap(-0.5) == 0.0
     assert helix.wrap(helix.lam_max + 3.0) == helix.lam_max
     assert helix.wrap(2.0) == 2.0
+
+
+def test_arclength_inverse_near_the_seam(paper):
+    L = paper.length_m
+    for s in (0.0, 1e-15, 1e-9, L - 1e-9, L - 1e-15, L, 2 * L):
+        lam = paper.lam_at_arclength(s)
+        assert 0.0 <= lam < paper.lam_max
+        expect = s % L
+        got = paper.arclength(lam)
+        # s just below L maps to lam just below lam_max or (rounding) to 0: both are the seam.
+        assert min(abs(got - expect), abs(abs(got - expect) - L)) < 1e-9
