@@ -272,3 +272,26 @@ def test_attractive_on_the_other_shipped_paths(name):
             v = v + dt * c.acceleration
             y = y + dt * v
         assert converged_at is not None, (name, i, st)
+
+
+def test_transversal_correction_is_delivered_in_full_while_tangential_gives_way(paper_path):
+    """3 mm off the path at rest with eta2_ref = 1.5 m/s: the tangential loop asks for ~60 m/s^2,
+    far beyond the limits; the transversal PD (-kp e - kd e_dot) is still delivered exactly and the
+    tangential acceleration is what is cut back."""
+    f = PathFollower(paper_path, speed=1.5)
+    lam = 0.25 * paper_path.lam_max
+    fr = paper_path.frame(lam)
+    y = paper_path.eval(lam).sigma + 0.003 * fr.e2
+    v = np.zeros(3)
+    c = f.update(y, v)
+    alpha, beta = f.decoupling(y, v)
+    u = beta @ c.acceleration + alpha
+    st = c.state
+    kp, kd = f.gains.transversal_kp, f.gains.transversal_kd
+    assert u[1] == pytest.approx(-kp * st.xi1 - kd * st.xi2, rel=1e-9)
+    assert u[2] == pytest.approx(-kp * st.phi1 - kd * st.phi2, abs=1e-9)
+    u_eta_wanted = f.gains.tangential_kd * (1.5 - st.eta2)
+    assert 0.0 < u[0] < 0.5 * u_eta_wanted
+    assert c.saturation.tangential and not c.saturation.transversal
+    assert c.saturation.tilt or c.saturation.thrust  # the tangential part went to the boundary
+    assert feasible(f.limits, c.acceleration)
