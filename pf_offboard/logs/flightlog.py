@@ -10,8 +10,8 @@ from __future__ import annotations
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 
+from pf_offboard.logs._io import Closing
 from pf_offboard.logs.steplog import StepLogWriter, StepRecord
 from pf_offboard.logs.tlog import TlogWriter
 
@@ -47,7 +47,7 @@ def log_stem(path: str | Path) -> str:
     return name.rsplit(".", 1)[0] if "." in name else name
 
 
-class FlightLog:
+class FlightLog(Closing):
     """Writers for one flight: ``with FlightLog.open(out_dir) as log: log.frame(...)``.
 
     ``frame(bytes, unix_time_s)`` logs MAVLink traffic in either direction (the direction is
@@ -81,14 +81,3 @@ class FlightLog:
     def close(self) -> None:
         self._tlog.close()
         self._steps.close()
-
-    def __enter__(self) -> FlightLog:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

@@ -14,12 +14,12 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 from typing import TextIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pf_offboard.logs._io import StreamWriter
 from pf_offboard.logs.tlog import LogError, read_log_bytes
 
 Vec3 = tuple[float, float, float]
@@ -121,7 +121,7 @@ def record_to_row(record: StepRecord) -> list[str]:
     return row
 
 
-class StepLogWriter:
+class StepLogWriter(StreamWriter):
     """Write :class:`StepRecord` rows to a CSV file with the :data:`COLUMNS` header.
 
     ``with StepLogWriter.open(path) as w: w.write(record)``.
@@ -130,7 +130,7 @@ class StepLogWriter:
     _FLUSH_EVERY = 250  # rows; a crash loses at most about a second of a 250 Hz log
 
     def __init__(self, stream: TextIO) -> None:
-        self._stream = stream
+        super().__init__(stream)
         self._csv = csv.writer(stream, lineterminator="\n")
         self._csv.writerow(COLUMNS)
         self.rows_written = 0
@@ -150,22 +150,6 @@ class StepLogWriter:
     def write_all(self, records: Iterable[StepRecord]) -> None:
         for r in records:
             self.write(r)
-
-    def close(self) -> None:
-        if not self._stream.closed:
-            self._stream.flush()
-            self._stream.close()
-
-    def __enter__(self) -> StepLogWriter:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 def _parse_float(text: str, where: str, column: str) -> float:

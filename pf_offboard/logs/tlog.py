@@ -25,12 +25,12 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 from typing import BinaryIO, Literal
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink_dialect
 
 from pf_offboard.errors import InputError
+from pf_offboard.logs._io import StreamWriter
 
 #: MAV_COMP_ID_ONBOARD_COMPUTER: the component id pf-offboard's own frames carry.
 OWN_COMPONENT_ID = 191
@@ -68,7 +68,7 @@ class TlogEntry:
     frame: bytes  # the raw MAVLink frame as logged
 
 
-class TlogWriter:
+class TlogWriter(StreamWriter):
     """Append MAVLink frames to a ``.tlog`` with their UNIX timestamps.
 
     Use as ``with TlogWriter.open(path) as w: w.write(frame_bytes, unix_time_s)``. The file
@@ -77,7 +77,7 @@ class TlogWriter:
     """
 
     def __init__(self, stream: BinaryIO) -> None:
-        self._stream = stream
+        super().__init__(stream)
         self.records_written = 0
 
     @classmethod
@@ -99,25 +99,6 @@ class TlogWriter:
     def write_message(self, message: mavlink_dialect.MAVLink_message, unix_time_s: float) -> None:
         """Log an already packed pymavlink message (its ``get_msgbuf()``)."""
         self.write(message.get_msgbuf(), unix_time_s)
-
-    def flush(self) -> None:
-        self._stream.flush()
-
-    def close(self) -> None:
-        if not self._stream.closed:
-            self._stream.flush()
-            self._stream.close()
-
-    def __enter__(self) -> TlogWriter:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 def read_log_bytes(path: Path) -> bytes:
