@@ -96,6 +96,7 @@ class Autopilot:
             dyn_spawn = Spawn.ground(spawn.position_ned_m)
         self.sim = Simulator(vehicle, rng_dyn, dyn_spawn)
         self.truth: VehicleState = self.sim.state()
+        self._estimate_cache: tuple[object, int, tuple[np.ndarray, np.ndarray, float]] = (None, -1, (np.zeros(3), np.zeros(3), 0.0))
         self.time_s = 0.0
         self.est_offset_ned_m = np.zeros(3)
         self.reset_counter = 0
@@ -275,8 +276,13 @@ class Autopilot:
         return system in (0, 1) and component in (0, 1)
 
     def _estimate(self) -> tuple[np.ndarray, np.ndarray, float]:
-        _, _, yaw = euler_from_q(self.truth.q_ned_frd)
-        return self.est_position_ned_m, np.asarray(self.truth.velocity_ned_m_s), yaw
+        """(position, velocity, yaw) as the estimator reports them; cached per vehicle state."""
+        truth = self.truth
+        if self._estimate_cache[0] is not truth or self._estimate_cache[1] != self.reset_counter:
+            _, _, yaw = euler_from_q(truth.q_ned_frd)
+            estimate = (truth.position_ned_m + self.est_offset_ned_m, np.asarray(truth.velocity_ned_m_s), yaw)
+            self._estimate_cache = (truth, self.reset_counter, estimate)
+        return self._estimate_cache[2]
 
     def _on_position_target(self, msg: mavlink.MAVLink_message) -> list[Out]:
         pos, vel, yaw = self._estimate()

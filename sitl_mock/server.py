@@ -45,6 +45,30 @@ def new_mavlink() -> mavlink.MAVLink:
     return mav
 
 
+def parse_datagram(mav: mavlink.MAVLink, data: bytes) -> list[mavlink.MAVLink_message]:
+    """Decode the whole MAVLink frames of one UDP datagram with pymavlink's ``decode`` (CRC
+    checked; failures are dropped), skipping the byte-by-byte parser. Anything unexpected
+    (a partial frame, garbage) goes to pymavlink's resynchronising ``parse_buffer``."""
+    out: list[mavlink.MAVLink_message] = []
+    i, n = 0, len(data)
+    while i < n:
+        marker = data[i]
+        if marker == mavlink.PROTOCOL_MARKER_V2 and i + 3 <= n:
+            length = 12 + data[i + 1] + (mavlink.MAVLINK_SIGNATURE_BLOCK_LEN if data[i + 2] & 1 else 0)
+        elif marker == mavlink.PROTOCOL_MARKER_V1 and i + 2 <= n:
+            length = 8 + data[i + 1]
+        else:
+            length = 0
+        if length == 0 or i + length > n:
+            return out + [m for m in (mav.parse_buffer(data[i:]) or []) if m.get_type() != "BAD_DATA"]
+        try:
+            out.append(mav.decode(bytearray(data[i : i + length])))
+        except mavlink.MAVError:
+            pass  # CRC or length mismatch: the frame is dropped, as the real autopilots do
+        i += length
+    return out
+
+
 def encode(mav: mavlink.MAVLink, msg: mavlink.MAVLink_message) -> bytes:
     """Pack ``msg`` with ``mav``'s sequence number (MAVLink 2) and advance it."""
     data = msg.pack(mav)
@@ -346,7 +370,7 @@ class MockAutopilot:
 
     def _udp_datagram(self, data: bytes, addr: Any) -> None:
         peer = self._udp_peer(addr)
-        self._receive(peer, data)
+        self._receive(peer, data, datagram=True)
 
     async def _tcp_client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         link = self._next_link
@@ -374,11 +398,11 @@ class MockAutopilot:
             self.autopilot.remove_link(link)
             writer.close()
 
-    def _receive(self, peer: _Peer, data: bytes) -> None:
+    def _receive(self, peer: _Peer, data: bytes, datagram: bool = False) -> None:
         if self.config.faults.loss > 0.0 and self.faults.drop_incoming():
             return
         try:
-            msgs = peer.mav.parse_buffer(data)
+            msgs = parse_datagram(peer.mav, data) if datagram else peer.mav.parse_buffer(data)
         except Exception:  # malformed traffic must never stop the mock  # noqa: BLE001
             return
         if not msgs:
