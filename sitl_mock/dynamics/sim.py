@@ -640,7 +640,7 @@ class Simulator:
                 # Roll/pitch first: the collective may drop to make room at the top; at the bottom
                 # it rises (airmode) or roll/pitch shrink (PX4 default, airmode off).
                 # Collective, led against the motors' present mean thrust like the torques.
-                c = cc + lead_c * (cc - 0.25 * (t0 + t1 + t2 + t3))
+                c = cc + lead_c * (cc - 0.25 * (t0 + t1 + t2 + t3)) if lead_c > 0.0 else cc
                 if c > tmax - mm:
                     c = tmax - mm
                 if c < tmin + mm and airmode:

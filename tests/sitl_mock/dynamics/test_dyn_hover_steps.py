@@ -89,3 +89,11 @@ def test_yaw_setpoint_and_yaw_rate_hold() -> None:
         s = sim.step(0.004, AccelerationSetpoint((0.0, 0.0, 0.0), yaw_rad=None, yaw_rate_rad_s=0.5))
     assert s.euler_rad[2] == pytest.approx(1.5, abs=0.05)
     assert abs(s.position_ned_m[2] + 10.0) < 0.01
+
+
+def test_thrust_lead_shortens_the_vertical_lag() -> None:
+    params = preset("fast")
+    plain = accel_step_rise_time_s(params, (0.0, 0.0, -0.5))
+    led = accel_step_rise_time_s(params.with_(thrust_lead=2.0), (0.0, 0.0, -0.5))
+    assert plain == pytest.approx(params.motor_time_constant_s, rel=0.02)
+    assert led == pytest.approx(params.motor_time_constant_s / 3.0, rel=0.1)
