@@ -104,8 +104,9 @@ def _crossing(path: Path) -> tuple[float, float]:
 
 @pytest.mark.parametrize("name", ["paper", "figure8", "paper_rmf"])
 @pytest.mark.parametrize("direction", [1.0, -1.0])
-@pytest.mark.parametrize("offset", [0.0, 0.05])
-def test_self_intersection_keeps_lambda_monotonic(name, direction, offset, request):
+@pytest.mark.parametrize("offset", [0.0, 0.05, 0.3])
+@pytest.mark.parametrize("side", ["e2", "e3"])
+def test_self_intersection_keeps_lambda_monotonic(name, direction, offset, side, request):
     path = request.getfixturevalue(name)
     for lam_c in _crossing(path):
         proj = Projector(path)
@@ -114,7 +115,7 @@ def test_self_intersection_keeps_lambda_monotonic(name, direction, offset, reque
         prev = None
         for lam0 in lams:
             f = path.frame(path.wrap(lam0))
-            y = path.eval(path.wrap(lam0)).sigma + offset * f.e2
+            y = path.eval(path.wrap(lam0)).sigma + offset * getattr(f, side)
             lam = proj.update(y)
             if prev is not None:
                 d = (lam - prev + path.lam_max / 2) % path.lam_max - path.lam_max / 2
