@@ -425,3 +425,13 @@ def test_estimator_reset_jumps_estimate_not_vehicle() -> None:
 def test_odometry_frames_like_px4() -> None:
     odo = make("px4").build(mavlink.MAVLINK_MSG_ID_ODOMETRY)
     assert (odo.frame_id, odo.child_frame_id) == (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD)
+
+
+def test_scheduled_wind_gust_pushes_the_hovering_vehicle() -> None:
+    calm = make("px4", spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
+    gusty = make("px4", spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)),
+                 faults=FaultConfig(gust_at_s=0.5, gust_ned_m_s=(8.0, 0.0, 0.0), gust_duration_s=2.0))
+    run(calm, 2.0)
+    run(gusty, 2.0)
+    assert abs(calm.truth.position_ned_m[0]) < 0.02
+    assert gusty.truth.position_ned_m[0] > 0.1  # blown north, the hold controller fights back
