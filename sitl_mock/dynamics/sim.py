@@ -125,7 +125,8 @@ class Simulator:
         self._vel_int = [0.0, 0.0, 0.0]
         # Wind.
         self._wind = Wind()
-        self._gusts: list[Gust] = []
+        self._gusts: list[Gust] = []  # the Wind's gusts + those from add_gust
+        self._added_gusts: list[Gust] = []
         self._turb = [0.0, 0.0, 0.0]
         self._normals: list[float] = []
         self._wind_now = (0.0, 0.0, 0.0)
@@ -246,12 +247,14 @@ class Simulator:
         if not isinstance(wind, Wind):
             raise ValueError(f"Simulator.set_wind.wind: expected Wind, got {type(wind).__name__}")
         self._wind = wind
-        self._gusts = [g for g in self._gusts] + list(wind.gusts)
+        self._gusts = list(wind.gusts) + self._added_gusts
         self._update_wind()
 
     def add_gust(self, start_s: float, duration_s: float, velocity_ned_m_s: tuple[float, float, float]) -> None:
         """Schedule a (1 − cos) gust at simulated time ``start_s``."""
-        self._gusts.append(Gust(start_s, duration_s, velocity_ned_m_s))
+        gust = Gust(start_s, duration_s, velocity_ned_m_s)
+        self._added_gusts.append(gust)
+        self._gusts.append(gust)
         self._update_wind()
 
     # ------------------------------------------------------------------------------------------
@@ -498,19 +501,7 @@ class Simulator:
         ry_ = _p_or_sqrt(ky, amx, ey) + ffy + yaw_rate_w * 2.0 * (qy * qz + qw * qx)
         rz_ = _p_or_sqrt(kz, amz, ez) + ffz + yaw_rate_w * (1.0 - 2.0 * (qx * qx + qy * qy))
         lx, ly, lz = self._rate_lim
-        if rx_ > lx:
-            rx_ = lx
-        elif rx_ < -lx:
-            rx_ = -lx
-        if ry_ > ly:
-            ry_ = ly
-        elif ry_ < -ly:
-            ry_ = -ly
-        if rz_ > lz:
-            rz_ = lz
-        elif rz_ < -lz:
-            rz_ = -lz
-        return (rx_, ry_, rz_)
+        return (_clamp(rx_, lx), _clamp(ry_, ly), _clamp(rz_, lz))
 
     # ------------------------------------------------------------------------------------------
     # The 1 kHz loop
@@ -590,7 +581,8 @@ class Simulator:
             countdown -= 1
             ticks += 1
             if on:
-                # Body-rate controller (P + I + motor-torque feedback) and mixer.
+                # Body-rate controller (P + I + motor-torque feedback) and mixer. Clamps are
+                # written out: a function call here costs more than the whole comparison.
                 ex, ey, ez = rsx - wx, rsy - wy, rsz - wz
                 ix += ex * dt
                 iy += ey * dt
@@ -773,6 +765,11 @@ def _state_from_fields(values: dict[str, object]) -> VehicleState:
     state = object.__new__(VehicleState)
     state.__dict__.update(values)
     return state
+
+
+def _clamp(value: float, limit: float) -> float:
+    """value limited to [-limit, limit]."""
+    return limit if value > limit else -limit if value < -limit else value
 
 
 def _p_or_sqrt(k: float, accel_max: float, e: float) -> float:

@@ -100,9 +100,12 @@ def test_gust_acts_only_during_its_window() -> None:
 def test_wind_object_gusts_and_set_wind() -> None:
     sim = make_sim("fast")
     sim.set_wind(Wind(mean_ned_m_s=(0.0, -1.0, 0.0), gusts=(Gust(0.0, 0.5, (2.0, 0.0, 0.0)),)))
+    sim.add_gust(0.0, 0.5, (0.0, 0.0, -1.0))
+    sim.set_wind(Wind(mean_ned_m_s=(0.0, -1.0, 0.0), gusts=(Gust(0.0, 0.5, (2.0, 0.0, 0.0)),)))  # replaces
     s = sim.step(0.252, AccelerationSetpoint((0.0, 0.0, 0.0)))
-    assert s.wind_ned_m_s[0] == pytest.approx(2.0, rel=0.02)
+    assert s.wind_ned_m_s[0] == pytest.approx(2.0, rel=0.02)  # the Wind's gust, once
     assert s.wind_ned_m_s[1] == pytest.approx(-1.0)
+    assert s.wind_ned_m_s[2] == pytest.approx(-1.0, rel=0.02)  # add_gust survives set_wind
 
 
 def _run(seed: int, measure_every_step: bool = True) -> tuple[np.ndarray, np.ndarray]:
