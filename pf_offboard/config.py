@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from pf_offboard.control.types import GRAVITY_M_S2, Gains, Limits, YawSpec
+from pf_offboard.control.types import GRAVITY_M_S2, MIN_THRUST_FLOOR_M_S2, Gains, Limits, YawSpec
 from pf_offboard.errors import ConfigError, InputError
 from pf_offboard.frames import ned_to_enu, yaw_ned_to_enu, yaw_rate_ned_to_enu
 
@@ -211,7 +211,9 @@ def _limits(data: Any) -> Limits:
     default = Limits()
     g = GRAVITY_M_S2
     tilt = _number(d, "max_tilt_deg", "limits.max_tilt_deg", default.max_tilt_deg, 0.0, 80.0, lo_open=True)
-    tmin = _number(d, "min_thrust_m_s2", "limits.min_thrust_m_s2", default.min_thrust_m_s2, 0.0, round(0.9 * g, 3))
+    tmin = _number(
+        d, "min_thrust_m_s2", "limits.min_thrust_m_s2", default.min_thrust_m_s2, MIN_THRUST_FLOOR_M_S2, round(0.9 * g, 3)
+    )
     tmax = _number(d, "max_thrust_m_s2", "limits.max_thrust_m_s2", default.max_thrust_m_s2, round(1.1 * g, 3), 100.0)
     vapp = _number(
         d, "max_approach_speed_m_s", "limits.max_approach_speed_m_s", default.max_approach_speed_m_s, 0.05, 20.0

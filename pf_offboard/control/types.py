@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from pf_offboard.errors import InputError
 
 GRAVITY_M_S2 = 9.81  # the paper's g
+MIN_THRUST_FLOOR_M_S2 = 0.5  # lowest allowed min_thrust_m_s2 (attitude needs |f| > 0)
 
 
 def _finite(name: str, value: float) -> float:
@@ -93,8 +94,12 @@ class Limits:
             _finite(name, getattr(self, name))
         if not 0.0 < self.max_tilt_deg <= 80.0:
             raise InputError("max_tilt_deg", f"must be in (0, 80] deg, got {self.max_tilt_deg}")
-        if not 0.0 <= self.min_thrust_m_s2 <= 0.9 * GRAVITY_M_S2:
-            raise InputError("min_thrust_m_s2", f"must be in [0, {0.9 * GRAVITY_M_S2:.3f}] m/s^2, got {self.min_thrust_m_s2}")
+        # > 0: at zero thrust the attitude (body z along f) is undefined
+        if not MIN_THRUST_FLOOR_M_S2 <= self.min_thrust_m_s2 <= 0.9 * GRAVITY_M_S2:
+            raise InputError(
+                "min_thrust_m_s2",
+                f"must be in [{MIN_THRUST_FLOOR_M_S2}, {0.9 * GRAVITY_M_S2:.3f}] m/s^2, got {self.min_thrust_m_s2}",
+            )
         if not 1.1 * GRAVITY_M_S2 <= self.max_thrust_m_s2 <= 100.0:
             raise InputError(
                 "max_thrust_m_s2", f"must be in [{1.1 * GRAVITY_M_S2:.3f}, 100] m/s^2 (above hover), got {self.max_thrust_m_s2}"

@@ -295,3 +295,26 @@ def test_transversal_correction_is_delivered_in_full_while_tangential_gives_way(
     assert c.saturation.tangential and not c.saturation.transversal
     assert c.saturation.tilt or c.saturation.thrust  # the tangential part went to the boundary
     assert feasible(f.limits, c.acceleration)
+
+
+@pytest.mark.parametrize("name", ["paper.yaml", "straight.yaml", "helix.yaml"])
+def test_any_state_gives_a_feasible_finite_command(name):
+    """500 random states (up to 20 m away, 15 m/s), each after a reset and then warm-started:
+    the command is finite, within the limits, with a unit quaternion and thrust in range."""
+    f = PathFollower.from_config(config_path(name))
+    rng = np.random.default_rng(5)
+    lim = f.limits
+    for i in range(500):
+        if i % 2 == 0:
+            f.reset()
+        lam = rng.uniform(0.0, f.path.lam_max)
+        d = rng.normal(size=3)
+        y = f.path.eval(lam).sigma + d / np.linalg.norm(d) * rng.uniform(0.0, 20.0) ** rng.uniform(0.0, 1.0)
+        w = rng.normal(size=3)
+        v = w / np.linalg.norm(w) * rng.uniform(0.0, 15.0)
+        c = f.update(y, v)
+        assert np.all(np.isfinite(c.acceleration)) and np.all(np.isfinite(c.body_rates))
+        assert feasible(lim, c.acceleration)
+        assert lim.min_thrust_m_s2 - 1e-9 <= c.thrust <= lim.max_thrust_m_s2 + 1e-9
+        assert abs(np.linalg.norm(c.attitude) - 1.0) < 1e-12
+        assert math.isfinite(c.yaw) and math.isfinite(c.yaw_rate)
