@@ -23,6 +23,7 @@ from sitl_mock.dynamics import (
     MotorsOff,
     RateSetpoint,
     Setpoint,
+    quat_mul,
 )
 from sitl_mock.rotations import euler_from_q, q_from_euler
 from sitl_mock.setpoints import AttitudeTarget, TrajectoryTarget
@@ -96,19 +97,6 @@ def _shape(current: np.ndarray, target: np.ndarray, max_step: float) -> np.ndarr
     if norm <= max_step or norm == 0.0:
         return target.copy()
     return current + delta * (max_step / norm)
-
-
-def _q_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.array(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ]
-    )
 
 
 class ArduGuided:
@@ -275,6 +263,6 @@ class ArduGuided:
             if angle > 0.0:
                 axis = w / angle
                 dq = np.concatenate(([math.cos(angle / 2)], axis * math.sin(angle / 2)))
-                self.q_t = _q_mul(self.q_t, dq)
+                self.q_t = np.array(quat_mul(tuple(self.q_t), tuple(dq)))
                 self.q_t /= float(np.linalg.norm(self.q_t))
         return AttitudeSetpoint(tuple(float(v) for v in self.q_t), thrust, target.rates_frd_rad_s)  # type: ignore[arg-type]

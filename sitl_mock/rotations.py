@@ -1,4 +1,5 @@
-"""Small rotation helpers for the autopilot layer (NED world, FRD body, q = (w, x, y, z))."""
+"""Rotation helpers for the autopilot layer (NED world, FRD body, q = (w, x, y, z)); Euler
+conversions are the dynamics' own."""
 
 from __future__ import annotations
 
@@ -6,29 +7,17 @@ import math
 
 import numpy as np
 
+from sitl_mock.dynamics import euler_to_quat, quat_to_euler
+
 
 def euler_from_q(q: np.ndarray) -> tuple[float, float, float]:
     """(roll, pitch, yaw) rad, ZYX convention, of a body-to-world quaternion."""
-    w, x, y, z = (float(v) for v in q)
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw
+    return quat_to_euler(tuple(float(v) for v in q))  # type: ignore[arg-type]
 
 
 def q_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """Body-to-world quaternion (w, x, y, z) from ZYX Euler angles in rad."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array(
-        [
-            cr * cp * cy + sr * sp * sy,
-            sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-        ]
-    )
+    return np.array(euler_to_quat(roll, pitch, yaw))
 
 
 def rotate_body_to_world(q: np.ndarray, v: np.ndarray) -> np.ndarray:
