@@ -33,6 +33,10 @@ from pf_offboard.sim.flight import SimSpec, simulate  # noqa: E402
 DATA = ROOT / "tests" / "data"
 FIGURES = ROOT / "docs" / "figures"
 PAPER = ROOT / "configs" / "paper.yaml"
+# The figures fly the paper's path and speed with gentler gains (2 Hz / 1.5 Hz): with the paper's
+# 6 Hz / 4 Hz the core limit-cycles against the mock's vehicle (see docs/logs.md). Switch this to
+# PAPER once that is resolved.
+FIGURE_CONFIG = FIGURES / "paper_sim.yaml"
 EPOCH_UNIX_S = 1_780_000_000.0  # fixed so the .tlog bytes do not depend on when this runs
 
 
@@ -109,7 +113,7 @@ def regenerate_goldens(out_dir: Path = DATA) -> list[Path]:
     return written
 
 
-def regenerate_figures(out_dir: Path = FIGURES, config: Path = PAPER) -> list[Path]:
+def regenerate_figures(out_dir: Path = FIGURES, config: Path = FIGURE_CONFIG) -> list[Path]:
     from pf_offboard.logs.plot import make_figures
 
     out_dir.mkdir(parents=True, exist_ok=True)
