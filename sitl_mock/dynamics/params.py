@@ -88,6 +88,9 @@ class VehicleParams:
     thrust_lead: float
     attitude_loop_hz: float  # attitude controller rate (rate loop and physics run at 1 kHz)
     tilt_max_rad: float  # acceleration mode tilt limit (MPC_TILTMAX_AIR)
+    # MPC_ACC_DECOUPLE (PX4 default 1): the tilt ignores the vertical acceleration demand, so the
+    # horizontal acceleration flown is a_xy·(g − a_z)/g. False: tilt from the full demand (exact).
+    accel_decouple: bool
     thrust_min_norm: float  # acceleration mode thrust floor (MPC_THR_MIN)
     thrust_max_norm: float  # acceleration mode thrust ceiling (MPC_THR_MAX)
     # Autopilot position controller (PositionSetpoint: hold, loiter, land, takeoff, brake).
@@ -176,6 +179,7 @@ def _fast() -> VehicleParams:
         thrust_lead=0.0,
         attitude_loop_hz=250.0,
         tilt_max_rad=math.radians(60.0),
+        accel_decouple=False,  # MPC_ACC_DECOUPLE = 0: the acceleration is flown exactly
         thrust_min_norm=0.05,
         thrust_max_norm=1.0,
         position_p_1_s=2.0,
@@ -217,6 +221,7 @@ def _px4_default() -> VehicleParams:
         thrust_lead=0.0,
         attitude_loop_hz=250.0,
         tilt_max_rad=math.radians(45.0),
+        accel_decouple=True,
         thrust_min_norm=0.12,
         thrust_max_norm=1.0,
         position_p_1_s=0.95,

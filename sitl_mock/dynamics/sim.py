@@ -285,6 +285,7 @@ class Simulator:
         self._hover_thrust = pr.hover_thrust
         self._inv_g = 1.0 / GRAVITY_M_S2
         self._thr_min, self._thr_max = pr.thrust_min_norm, pr.thrust_max_norm
+        self._accel_decouple = pr.accel_decouple
 
     def _update_wind(self) -> None:
         self._wind_dynamic = bool(self._gusts) or self._wind.turbulence_std_m_s > 0.0
@@ -420,7 +421,9 @@ class Simulator:
                            ) -> tuple[tuple[float, float, float, float], float]:
         """PX4 PositionControl::_accelerationControl + ControlMath::bodyzToAttitude."""
         ax, ay, az = accel_ned
-        bx, by, bz = -ax, -ay, GRAVITY_M_S2 - az  # desired body z (down) axis in NED, unnormalised
+        # Desired body z (down) axis in NED, unnormalised. PX4's MPC_ACC_DECOUPLE = 1 (default)
+        # tilts as if the vertical demand were zero; the collective below still meets it exactly.
+        bx, by, bz = -ax, -ay, GRAVITY_M_S2 if self._accel_decouple else GRAVITY_M_S2 - az
         n = math.sqrt(bx * bx + by * by + bz * bz)
         if n < 1e-6:
             bx, by, bz = 0.0, 0.0, 1.0

@@ -53,16 +53,21 @@ def test_px4_default_attitude_bandwidth_documented() -> None:
         DOCUMENTED_ATTITUDE_BANDWIDTH_HZ["px4-default"], abs=0.3)
 
 
-def test_acceleration_setpoint_is_reached_without_bias(preset_name: str) -> None:
-    """Thrust acceleration (kinematic minus gravity plus drag) equals the setpoint in steady state."""
-    params = preset(preset_name)
+@pytest.mark.parametrize("decouple", [False, True])
+def test_acceleration_setpoint_is_reached_without_bias(preset_name: str, decouple: bool) -> None:
+    """Thrust acceleration (kinematic plus drag) equals the setpoint in steady state; with PX4's
+    MPC_ACC_DECOUPLE the horizontal part is scaled by (g - a_z)/g, the vertical part exact."""
+    params = preset(preset_name).with_(accel_decouple=decouple)
     sim = make_sim(params)
     target = np.array([1.0, -0.5, -0.3])
     sp = AccelerationSetpoint(tuple(target), yaw_rad=0.0)
     for _ in range(500):  # 2 s
         s = sim.step(0.004, sp)
     thrust_acc = s.accel_ned_m_s2 + params.drag_1_s * s.velocity_ned_m_s
-    np.testing.assert_allclose(thrust_acc, target, atol=2e-3)
+    expected = target.copy()
+    if decouple:
+        expected[:2] *= (G - target[2]) / G
+    np.testing.assert_allclose(thrust_acc, expected, atol=2e-3)
 
 
 def test_acceleration_mapping_respects_tilt_limit_and_thrust_floor() -> None:
