@@ -192,8 +192,8 @@ class PathFollower:
         tube: LawOutput | None = law.tube(terms, eta2_ref) if w < 1.0 else None
         if tube is None:
             w = 1.0
-        inv_s = 1.0 / math.sqrt(s[3] * s[3] + s[4] * s[4] + s[5] * s[5])
-        tan = (s[3] * inv_s, s[4] * inv_s, s[5] * inv_s)
+        # unit tangent and arclength derivatives at lam* (approach law, yaw, jerk feed-forward)
+        tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
         if w > 0.0:
             app = law.approach(r, v, tan, 0.0 if past_end else eta2_ref)
             if tube is None:
@@ -217,13 +217,13 @@ class PathFollower:
         f = (ax, ay, az + G)
         thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
         tilt, thrust_sat = law.thrust_set.active(f)
-        # feed-forward: on-path motion at eta2_ref (eqs. 25-27 via arclength derivatives)
-        _, sss_ss, sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
-        psi, dpsi = self._yaw.evaluate(st.eta1, tan, sss_ss)
+        # feed-forward: the on-path motion at eta2_ref (eqs. 25-27): jerk = sigma_sss eta2_ref^3,
+        # faded out with the fallback weight (no on-path motion to anticipate far away)
+        psi, dpsi = self._yaw.evaluate(st.eta1, tan, s_ss)
         eta2 = st.eta2 if w == 0.0 else (1.0 - w) * st.eta2 + w * (tan[0] * v[0] + tan[1] * v[1] + tan[2] * v[2])
         yaw_rate = dpsi * eta2
         k3 = (1.0 - w) * eta2_ref * eta2_ref * eta2_ref
-        jerk = (sss[0] * k3, sss[1] * k3, sss[2] * k3)
+        jerk = (s_sss[0] * k3, s_sss[1] * k3, s_sss[2] * k3)
         axes = attitude_from_thrust(f, psi)
         q = quaternion_from_axes(*axes)
         omega = body_rates(axes, thrust, jerk, yaw_rate)
