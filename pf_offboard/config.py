@@ -47,7 +47,7 @@ class FlightConfig:
     takeoff_altitude_m: float = 2.0
     throw_activation_height_m: float | None = None  # None: no throw activation
     end_action: str = "hold"  # at the end of an open path: hold | land
-    attitude_time_constant_s: float = 0.2  # rates mode: attitude error feedback time constant
+    attitude_time_constant_s: float = 0.1  # rates mode: attitude error feedback time constant
 
 
 @dataclass(frozen=True)
@@ -245,7 +245,7 @@ def _flight(data: Any) -> FlightConfig:
         ),
         end_action=_choice(d, "end_action", "flight.end_action", f.end_action, END_ACTIONS),
         attitude_time_constant_s=_number(
-            d, "attitude_time_constant_s", "flight.attitude_time_constant_s", f.attitude_time_constant_s, 0.02, 2.0
+            d, "attitude_time_constant_s", "flight.attitude_time_constant_s", f.attitude_time_constant_s, 0.01, 2.0
         ),  # type: ignore[arg-type]
     )
 
