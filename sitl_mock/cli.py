@@ -10,6 +10,7 @@ import argparse
 import asyncio
 import json
 import math
+import signal
 import sys
 from collections.abc import Sequence
 
@@ -236,6 +237,10 @@ async def _serve(config: MockConfig, print_ports: bool) -> None:
     from sitl_mock.server import MockAutopilot
 
     async with MockAutopilot(config) as mock:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            # Stop cleanly (sockets closed, truth log flushed) when terminated, e.g. by spawn().stop().
+            loop.add_signal_handler(sig, mock.request_stop)
         if print_ports:
             print(json.dumps({"udp": mock.ports.udp, "tcp": mock.ports.tcp}), flush=True)
         print(_describe(config, mock.ports), file=sys.stderr, flush=True)

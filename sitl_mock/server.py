@@ -209,6 +209,11 @@ class MockAutopilot:
         if self._done is not None:
             self._done.set()
 
+    def request_stop(self) -> None:
+        """Make :meth:`wait_done` return (e.g. from a signal handler)."""
+        if self._done is not None:
+            self._done.set()
+
     async def wait_done(self) -> None:
         """Until ``duration_s`` of simulated time has run (or :meth:`stop`)."""
         assert self._done is not None, "start() first"

@@ -81,3 +81,14 @@ def test_duration_runs_and_writes_truth_log(tmp_path) -> None:
     assert float(rows[-1]["time_s"]) == pytest.approx(1.0, abs=0.005)
     assert float(rows[-1]["vz_m_s"]) > 8.0  # ballistic: motors locked until commanded
     assert rows[0]["armed"] == "1" and rows[0]["mode"] == "AUTO.LOITER"
+
+
+@pytest.mark.integration
+def test_spawned_mock_stops_cleanly_and_flushes_the_truth_log(tmp_path) -> None:
+    from sitl_mock.runner import spawn
+
+    log = tmp_path / "truth.csv"
+    config = MockConfig(udp_local_port=0, udp_remote=None, lockstep=True, truth_log=str(log))
+    handle = spawn(config)
+    assert handle.stop() == 0  # SIGTERM → clean shutdown, exit code 0
+    assert log.read_text().startswith("time_s,")
