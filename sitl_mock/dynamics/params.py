@@ -171,7 +171,7 @@ def _fast() -> VehicleParams:
         yaw_torque_per_thrust_m=0.016,
         drag_1_s=0.2,
         hover_thrust=1.0 / 3.5,
-        roll_pitch=cascade_gains_for_poles(250.0, tau, rate_limit_rad_s=20.0, rate_i_fraction=0.0,
+        roll_pitch=cascade_gains_for_poles(280.0, tau, rate_limit_rad_s=20.0, rate_i_fraction=0.0,
                                            attitude_accel_max_rad_s2=60.0),
         yaw=cascade_gains_for_poles(60.0, tau, rate_limit_rad_s=6.0, rate_i_fraction=0.5,
                                     attitude_accel_max_rad_s2=20.0),
