@@ -31,6 +31,14 @@ class CascadeGains:
     # steps from overshooting when the motors saturate. 0: pure P (PX4).
     attitude_accel_max_rad_s2: float = 0.0
 
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"CascadeGains.{f.name}: must be finite and >= 0, got {value!r}")
+        if self.rate_limit_rad_s <= 0.0:
+            raise ValueError(f"CascadeGains.rate_limit_rad_s: must be > 0, got {self.rate_limit_rad_s!r}")
+
 
 def cascade_gains_for_poles(
     pole_rad_s: float,
@@ -43,7 +51,8 @@ def cascade_gains_for_poles(
 
     Per axis: α_des = k_p·(ω_sp − ω), ω_sp = k_att·e; motor command u = (1 + k_d)·α_des − k_d·x with
     τ_m·dx/dt = u − x (x: angular acceleration of the motors' present thrust). Characteristic
-    polynomial τ_m s³ + (1 + k_d) s² + (1 + k_d) k_p s + (1 + k_d) k_p k_att = τ_m (s + p)³.
+    polynomial τ_m s³ + (1 + k_d) s² + (1 + k_d) k_p s + (1 + k_d) k_p k_att = τ_m (s + p)³
+    (exact when 3·p·τ_m ≥ 1; below that k_d would be negative and is set to 0).
     """
     p, tau = pole_rad_s, motor_time_constant_s
     lead = max(1.0, 3.0 * p * tau)

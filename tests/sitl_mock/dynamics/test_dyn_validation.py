@@ -12,6 +12,7 @@ from conftest import make_sim
 from sitl_mock.dynamics import (
     AccelerationSetpoint,
     AttitudeSetpoint,
+    CascadeGains,
     Gust,
     MotorsOff,
     PositionSetpoint,
@@ -57,6 +58,9 @@ NAN = float("nan")
         (lambda: preset("fast").with_(thrust_to_weight=0.9), "thrust_to_weight"),
         (lambda: preset("fast").with_(attitude_loop_hz=300.0), "attitude_loop_hz"),
         (lambda: preset("quadzilla"), "quadzilla"),
+        (lambda: CascadeGains(1.0, NAN, 0.0, 0.0, 1.0), "rate_p_1_s"),
+        (lambda: CascadeGains(1.0, 1.0, 0.0, -1.0, 1.0), "rate_d"),
+        (lambda: CascadeGains(1.0, 1.0, 0.0, 0.0, 0.0), "rate_limit_rad_s"),
     ],
 )
 def test_invalid_values_raise_naming_the_field(build, field: str) -> None:
