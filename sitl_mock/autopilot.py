@@ -96,6 +96,7 @@ class Autopilot:
             dyn_spawn = Spawn.ground(spawn.position_ned_m)
         self.sim = Simulator(vehicle, rng_dyn, dyn_spawn)
         self.truth: VehicleState = self.sim.state()
+        self._position_sp_cache: tuple[object, PositionSetpoint | None] = (None, None)
         self._estimate_cache: tuple[object, int, tuple[np.ndarray, np.ndarray, float]] = (None, -1, (np.zeros(3), np.zeros(3), 0.0))
         self.time_s = 0.0
         self.est_offset_ned_m = np.zeros(3)
@@ -524,7 +525,9 @@ class Autopilot:
         elif interval_us == 0:
             table.set_interval(msgid, None, self.time_s)
         elif interval_us > 0 and math.isfinite(interval_us):
-            cap = max(1.0 / self.profile.max_rate_hz, self._step_dt())
+            # At most one per autopilot step; in real time also the autopilot's own cap. In lockstep
+            # a client may ask for one message per step whatever the step.
+            cap = self._step_dt() if self.config.lockstep else max(1.0 / self.profile.max_rate_hz, self._step_dt())
             table.set_interval(msgid, max(interval_us * 1e-6, cap), self.time_s)
         else:
             return DENIED
@@ -645,8 +648,12 @@ class Autopilot:
             out.append(self._text(mavlink.MAV_SEVERITY_INFO, "Failsafe deactivated"))
 
     def _position_sp(self, position_est: np.ndarray, yaw: float | None, velocity=(0.0, 0.0, 0.0)) -> PositionSetpoint:
+        """The dynamics' position controller, target converted from the estimate to the true frame."""
         true = position_est - self.est_offset_ned_m
-        return PositionSetpoint(tuple(float(v) for v in true), tuple(float(v) for v in velocity), yaw)
+        key = (float(true[0]), float(true[1]), float(true[2]), tuple(velocity), yaw)
+        if self._position_sp_cache[0] != key:  # holds repeat the same target: skip re-validation
+            self._position_sp_cache = (key, PositionSetpoint(key[:3], key[3], yaw))
+        return self._position_sp_cache[1]
 
     def _control(self, dt_s: float) -> Setpoint:
         if not self.armed or self.motors_locked:

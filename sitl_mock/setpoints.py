@@ -113,7 +113,7 @@ _ACC_BITS = (
 
 def _finite_or_nan(values: tuple[float, ...]) -> bool:
     """True if every value is finite or NaN (NaN = ignored); infinities are bad input."""
-    return all(math.isfinite(v) or math.isnan(v) for v in values)
+    return not any(map(math.isinf, values))
 
 
 def px4_position_target(msg, position_ned_m: np.ndarray, yaw_rad: float) -> TrajectoryTarget | Rejected:
@@ -124,8 +124,8 @@ def px4_position_target(msg, position_ned_m: np.ndarray, yaw_rad: float) -> Traj
     frame = int(msg.coordinate_frame)
     if frame not in (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_NED):
         return Rejected(f"coordinate_frame {frame} not supported (LOCAL_NED, BODY_NED only)")
-    pos = _axes((msg.x, msg.y, msg.z), mask, _POS_BITS)
-    vel = _axes((msg.vx, msg.vy, msg.vz), mask, _VEL_BITS)
+    pos = _NAN3 if mask & POS_IGNORE == POS_IGNORE else _axes((msg.x, msg.y, msg.z), mask, _POS_BITS)
+    vel = _NAN3 if mask & VEL_IGNORE == VEL_IGNORE else _axes((msg.vx, msg.vy, msg.vz), mask, _VEL_BITS)
     acc = _axes((msg.afx, msg.afy, msg.afz), mask, _ACC_BITS)
     yaw = math.nan if mask & YAW_IGNORE else float(msg.yaw)
     yaw_rate = math.nan if mask & YAW_RATE_IGNORE else float(msg.yaw_rate)
