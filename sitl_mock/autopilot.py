@@ -65,6 +65,16 @@ UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
 FAILED = mavlink.MAV_RESULT_FAILED
 
 
+# ArduPilot's REQUEST_DATA_STREAM groups → the messages of each group the mock can send.
+_DATA_STREAMS: dict[int, tuple[int, ...]] = {
+    mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: (mavlink.MAVLINK_MSG_ID_SYS_STATUS, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE),
+    mavlink.MAV_DATA_STREAM_RAW_SENSORS: (mavlink.MAVLINK_MSG_ID_HIGHRES_IMU,),
+    mavlink.MAV_DATA_STREAM_POSITION: (mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
+    mavlink.MAV_DATA_STREAM_EXTRA1: (mavlink.MAVLINK_MSG_ID_ATTITUDE,),
+    mavlink.MAV_DATA_STREAM_EXTRA2: (mavlink.MAVLINK_MSG_ID_VFR_HUD,),
+}
+
+
 @dataclass(frozen=True)
 class LogEvent:
     """Something the autopilot did, for the CLI log and for tests (simulated time)."""
@@ -262,6 +272,10 @@ class Autopilot:
             return self._on_param_read(msg, link) if self._for_me(msg) else []
         if msgid == mavlink.MAVLINK_MSG_ID_PARAM_SET:
             return self._on_param_set(msg) if self._for_me(msg) else []
+        if msgid == mavlink.MAVLINK_MSG_ID_REQUEST_DATA_STREAM and self.profile.name == "ardupilot":
+            if self._for_me(msg):
+                self._on_request_data_stream(msg, link)
+            return []
         if msgid == mavlink.MAVLINK_MSG_ID_PING and msg.target_system == 0:
             # A ping request: answer it addressed to the sender.
             reply = mavlink.MAVLink_ping_message(msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent())
@@ -341,6 +355,20 @@ class Autopilot:
         self.guided.set_angle(result, self.time_s)
         self.motors_locked = False
         return []
+
+    def _on_request_data_stream(self, msg: mavlink.MAVLink_message, link: int) -> None:
+        """ArduPilot's legacy stream groups (SRx_ parameters); PX4 ignores this message."""
+        table = self.streams.get(link)
+        if table is None:
+            return
+        groups = [msg.req_stream_id] if msg.req_stream_id != mavlink.MAV_DATA_STREAM_ALL else list(_DATA_STREAMS)
+        rate = float(msg.req_message_rate)
+        for group in groups:
+            for msgid in _DATA_STREAMS.get(group, ()):
+                if msg.start_stop and rate > 0:
+                    table.set_interval(msgid, max(1.0 / rate, self._step_dt()), self.time_s)
+                else:
+                    table.set_interval(msgid, math.inf, self.time_s)
 
     # --- parameters ---------------------------------------------------------------------------
     def _param_value(self, name: str) -> mavlink.MAVLink_message:

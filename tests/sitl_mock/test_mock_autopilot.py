@@ -435,3 +435,19 @@ def test_scheduled_wind_gust_pushes_the_hovering_vehicle() -> None:
     run(gusty, 2.0)
     assert abs(calm.truth.position_ned_m[0]) < 0.02
     assert gusty.truth.position_ned_m[0] > 0.1  # blown north, the hold controller fights back
+
+
+def test_ardupilot_request_data_stream_groups() -> None:
+    ap = make("ardupilot")
+    run(ap, 0.3)
+    ap.handle(mavlink.MAVLink_request_data_stream_message(1, 1, mavlink.MAV_DATA_STREAM_EXTRA1, 25, 1), 0)
+    ap.due_telemetry()
+    sent = []
+    for _ in range(250):  # 1 s
+        ap.step(DT)
+        sent += [m.get_type() for _, m in ap.due_telemetry()]
+    assert sent.count("ATTITUDE") == 25 and sent.count("HEARTBEAT") == 1
+    ap.handle(mavlink.MAVLink_request_data_stream_message(1, 1, mavlink.MAV_DATA_STREAM_ALL, 0, 0), 0)
+    run(ap, 1.0)
+    assert mavlink.MAVLINK_MSG_ID_ATTITUDE not in ap.streams[0].streams
+    assert make("px4").handle(mavlink.MAVLink_request_data_stream_message(1, 1, 0, 10, 1), 0) == []
