@@ -468,7 +468,8 @@ class Autopilot:
         if arm:
             if self.armed:
                 return ACCEPTED, []
-            if not force:
+            # PX4 runs the preflight checks for external (MAVLink) commands even when forced.
+            if not force or px4:
                 if not self.ekf_ready:
                     return self._refuse("Arming denied: no position estimate" if px4 else "PreArm: Need Position Estimate")
                 if not self.mode.armable or self.mode.behaviour in (Behaviour.LAND, Behaviour.RTL):
@@ -499,14 +500,14 @@ class Autopilot:
 
     def _cmd_set_mode(self, p: list[float]) -> tuple[int, list[Out]]:
         if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            return DENIED, []
+            return DENIED, []  # base-mode-only switching is not modelled
         if self.profile.name == "px4":
             main, sub = int(p[1]), int(p[2])
             spec = self.profile.mode_by_custom((main << 16) | ((sub if main == 4 else 0) << 24))
         else:
             spec = self.profile.mode_by_custom(int(p[1]))
-        if spec is None:
-            return (DENIED if self.profile.name == "px4" else FAILED), []
+        if spec is None:  # PX4: "Unsupported auto mode" → TEMPORARILY_REJECTED
+            return (TEMP_REJECTED if self.profile.name == "px4" else FAILED), []
         return self._cmd_mode(spec)
 
     def _cmd_mode_named(self, name: str) -> tuple[int, list[Out]]:
