@@ -500,8 +500,12 @@ class Simulator:
         ex, ey, ez = s * ex, s * ey, s * ez * self._yaw_err_scale
         amx, amz = self._att_accel_max
         # Yaw-rate feed-forward about WORLD z, expressed in body (third row of R).
-        rx_ = _p_or_sqrt(kx, amx, ex) + ffx + yaw_rate_w * 2.0 * (qx * qz - qw * qy)
-        ry_ = _p_or_sqrt(ky, amx, ey) + ffy + yaw_rate_w * 2.0 * (qy * qz + qw * qx)
+        # Roll/pitch: the square-root law acts on the tilt error's magnitude, so a diagonal
+        # error brakes in time too (the motors' roll/pitch authority is shared).
+        exy = math.sqrt(ex * ex + ey * ey)
+        sxy = _p_or_sqrt(kx, amx, exy) / exy if exy > 1e-12 else kx
+        rx_ = sxy * ex + ffx + yaw_rate_w * 2.0 * (qx * qz - qw * qy)
+        ry_ = sxy * ey + ffy + yaw_rate_w * 2.0 * (qy * qz + qw * qx)
         rz_ = _p_or_sqrt(kz, amz, ez) + ffz + yaw_rate_w * (1.0 - 2.0 * (qx * qx + qy * qy))
         lx, ly, lz = self._rate_lim
         return (_clamp(rx_, lx), _clamp(ry_, ly), _clamp(rz_, lz))
