@@ -173,7 +173,7 @@ class ReplayOptions:
 
     autopilot: str | None = None  # px4 | ardupilot; default from the recorded HEARTBEAT
     output_mode: str | None = None  # default: config flight.output_mode
-    state_source: str = "local_position"
+    state_source: str | None = None  # local_position | odometry; default: what the flight asked for
     hover_thrust: float | None = None  # default: config, else the PARAM_VALUE in the log
     tolerance: float = DEFAULT_TOLERANCE
 
@@ -190,6 +190,23 @@ def _output_mode_of(msg: Any) -> str:
     if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
         return "acceleration"
     return "rates" if int(msg.type_mask) & 128 else "attitude"
+
+
+_MSG_ID_LOCAL_POSITION_NED = 32
+_MSG_ID_ODOMETRY = 331
+_CMD_SET_MESSAGE_INTERVAL = 511
+
+
+def _state_source_of(entries: Sequence[TlogEntry]) -> str:
+    """The state telemetry the flight asked for (SET_MESSAGE_INTERVAL), local position if unsure."""
+    for e in entries:
+        m = e.message
+        if e.direction == "out" and m.get_type() == "COMMAND_LONG" and m.command == _CMD_SET_MESSAGE_INTERVAL and m.param2 > 0:
+            if int(m.param1) == _MSG_ID_ODOMETRY:
+                return "odometry"
+            if int(m.param1) == _MSG_ID_LOCAL_POSITION_NED:
+                return "local_position"
+    return "local_position"
 
 
 def _hover_from_log(entries: Sequence[TlogEntry], param: str) -> float | None:
@@ -245,7 +262,8 @@ def build_pipeline(
     encoder.time_constant_s = settings.attitude_time_constant_s
     if follower is None:
         follower = PathFollower.from_config(config)
-    return Pipeline(follower, encoder, Estimator(options.state_source)), profile, output_mode, target_system
+    source = options.state_source or _state_source_of(entries)
+    return Pipeline(follower, encoder, Estimator(source)), profile, output_mode, target_system
 
 
 def replay_flight(
@@ -321,7 +339,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE, help="largest allowed difference (default 1e-9)")
     parser.add_argument("--autopilot", choices=("px4", "ardupilot"), help="default: from the logged HEARTBEAT")
     parser.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="default: as flown")
-    parser.add_argument("--state-source", choices=("local_position", "odometry"), default="local_position")
+    parser.add_argument("--state-source", choices=("local_position", "odometry"),
+                        help="state telemetry the flight followed (default: the stream it requested)")  # fmt: skip
     parser.add_argument("--hover-thrust", type=float, help="normalised hover thrust (default: config, else logged parameter)")
 
 

@@ -17,8 +17,13 @@ PAPER = ROOT / "configs" / "paper.yaml"
 
 
 @pytest.mark.integration
-@pytest.mark.parametrize(("autopilot", "output"), [("px4", "acceleration"), ("px4", "attitude")])
-def test_fly_logs_replay_and_plot(tmp_path: Path, autopilot: str, output: str, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize(
+    ("autopilot", "output", "state_source"),
+    [("px4", "acceleration", "local_position"), ("px4", "attitude", "odometry")],
+)
+def test_fly_logs_replay_and_plot(
+    tmp_path: Path, autopilot: str, output: str, state_source: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     from sitl_mock.config import MockConfig, SpawnSpec
     from sitl_mock.runner import spawn
 
@@ -35,7 +40,7 @@ def test_fly_logs_replay_and_plot(tmp_path: Path, autopilot: str, output: str, c
         args = parser.parse_args([
             "--connect", f"udpout:127.0.0.1:{mock.ports.udp}", "--config", str(PAPER), "--airborne",
             "--duration", "1.5", "--output", output, "--autopilot", autopilot, "--log-dir", str(log_dir),
-            "--heartbeat-timeout", "10", "--quiet",
+            "--heartbeat-timeout", "10", "--quiet", "--state-source", state_source,
         ])  # fmt: skip
         outcome = fly(args)
     assert outcome.exit_code == 0, outcome.reason
@@ -45,6 +50,8 @@ def test_fly_logs_replay_and_plot(tmp_path: Path, autopilot: str, output: str, c
     assert len(records) > 50
     assert {"in", "out"} == {e.direction for e in entries}
     assert any(r.active for r in records)
+    state_msg = "ODOMETRY" if state_source == "odometry" else "LOCAL_POSITION_NED"
+    assert sum(e.message.get_type() == state_msg for e in entries) >= len(records)
     capsys.readouterr()
     assert main(["replay", str(tlog), "--config", str(PAPER)]) == 0
     out = capsys.readouterr().out
