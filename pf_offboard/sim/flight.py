@@ -320,7 +320,12 @@ class SimFlight:
     def run(self) -> SimResult:
         spec = self.spec
         self._epoch = spec.epoch_unix_s if spec.epoch_unix_s is not None else time.time()
-        max_steps = int(math.ceil((self.duration_s or 3600.0) / self.dt_s)) + 1
+        if self.duration_s is not None:
+            limit_s = self.duration_s
+        else:  # --laps: give up at three times the nominal time (stuck, or far too slow)
+            speed = max(abs(self.pipeline.speed_ref_m_s), 0.1) if math.isfinite(self.pipeline.speed_ref_m_s) else 1.0
+            limit_s = 30.0 + 3.0 * (spec.laps or 1.0) * self.path.length_m / speed
+        max_steps = int(math.ceil(limit_s / self.dt_s)) + 1
         with FlightLog.open(self.out_dir, spec.name, config_path=self.config_path) as log:
             self._setup(log)
             for _ in range(max_steps):
@@ -331,7 +336,7 @@ class SimFlight:
                     break
                 self._inbox.extend(msg for _, msg in self.autopilot.step(self.dt_s))
             else:
-                self.reason = "step limit reached"
+                self.reason = f"time limit {limit_s:.0f} s reached before {spec.laps:g} laps"
             paths = log.paths
         return SimResult(
             paths=paths,

@@ -167,3 +167,15 @@ def test_spec_checks() -> None:
         simulate(PAPER, SimSpec(autopilot="inav"), "/nonexistent")
     with pytest.raises(InputError, match="--throw: give either --start"):
         simulate(PAPER, SimSpec(start_enu_m=(0, 0, 2), throw_enu=(0, 0, 1, 0, 0, 3)), "/nonexistent")
+
+
+def test_laps_end_the_flight(tmp_path: Path, soft_paper: Path) -> None:
+    from pf_offboard.control import PathFollower
+
+    length_m = PathFollower.from_config(soft_paper).path.length_m
+    spec = SimSpec(start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, laps=0.2, epoch_unix_s=EPOCH)
+    result = simulate(soft_paper, spec, tmp_path)
+    assert result.reason == "0.2 laps done"
+    steps = [b.eta1_m - a.eta1_m for a, b in zip(result.records[1:], result.records[2:])]
+    travelled = sum(abs((d + length_m / 2) % length_m - length_m / 2) for d in steps)  # eta1 wraps
+    assert travelled == pytest.approx(0.2 * length_m, abs=0.1)  # within about a step at 1.5 m/s
