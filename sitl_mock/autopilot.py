@@ -463,22 +463,29 @@ class Autopilot:
         result = TEMP_REJECTED if self.profile.name == "px4" else FAILED
         return result, [self._text(mavlink.MAV_SEVERITY_CRITICAL, text)]
 
+    def _arming_failure(self) -> str | None:
+        """Why arming would be refused now (None: the checks pass)."""
+        px4 = self.profile.name == "px4"
+        if not self.ekf_ready:
+            return "Arming denied: no position estimate" if px4 else "PreArm: Need Position Estimate"
+        if not self.mode.armable or self.mode.behaviour in (Behaviour.LAND, Behaviour.RTL):
+            return f"Arming denied: not in an armable mode ({self.mode.name})" if px4 else "Arm: Mode not armable"
+        if px4 and self.mode.behaviour is Behaviour.OFFBOARD and not self.offboard_signal_ok():
+            return "Arming denied: offboard signal lost"
+        return None
+
+    def arming_checks_pass(self) -> bool:
+        return self._arming_failure() is None
+
     def _cmd_arm(self, arm: bool, force: bool) -> tuple[int, list[Out]]:
         px4 = self.profile.name == "px4"
         if arm:
             if self.armed:
                 return ACCEPTED, []
             # PX4 runs the preflight checks for external (MAVLink) commands even when forced.
-            if not force or px4:
-                if not self.ekf_ready:
-                    return self._refuse("Arming denied: no position estimate" if px4 else "PreArm: Need Position Estimate")
-                if not self.mode.armable or self.mode.behaviour in (Behaviour.LAND, Behaviour.RTL):
-                    return self._refuse(
-                        f"Arming denied: not in an armable mode ({self.mode.name})"
-                        if px4 else "Arm: Mode not armable"
-                    )
-                if px4 and self.mode.behaviour is Behaviour.OFFBOARD and not self.offboard_signal_ok():
-                    return self._refuse("Arming denied: offboard signal lost")
+            failure = self._arming_failure() if (not force or px4) else None
+            if failure is not None:
+                return self._refuse(failure)
             self.armed = True
             self.took_off = not self.truth.landed
             self.arm_time_s = self.landed_since_s = self.time_s

@@ -106,10 +106,12 @@ def heartbeat(ap: Autopilot) -> mavlink.MAVLink_message:
 
 
 def sys_status(ap: Autopilot) -> mavlink.MAVLink_message:
-    return mavlink.MAVLink_sys_status_message(
-        _SENSORS, _SENSORS, _SENSORS if ap.ekf_ready else _SENSORS & ~mavlink.MAV_SYS_STATUS_SENSOR_GPS,
-        200, 16200, 500, 100, 0, 0, 0, 0, 0, 0,
-    )
+    """Sensor bits; PREARM_CHECK healthy when arming would pass (MAVSDK's ``is_armable``)."""
+    present = _SENSORS | mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    health = _SENSORS if ap.ekf_ready else _SENSORS & ~mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    if ap.arming_checks_pass():
+        health |= mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    return mavlink.MAVLink_sys_status_message(present, present, health, 200, 16200, 500, 100, 0, 0, 0, 0, 0, 0)
 
 
 def extended_sys_state(ap: Autopilot) -> mavlink.MAVLink_message:

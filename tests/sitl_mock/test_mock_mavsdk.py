@@ -52,6 +52,10 @@ def test_mavsdk_connects_arms_and_flies_offboard() -> None:
                 assert abs(euler.roll_deg) < 1 and abs(euler.pitch_deg) < 1
                 assert await asyncio.wait_for(_first(telemetry.subscribe_flight_mode()), 10) == FlightMode.HOLD
                 assert await asyncio.wait_for(_first(telemetry.subscribe_armed()), 10) is False
+                # The canonical MAVSDK example waits for this before arming.
+                async for health in telemetry.subscribe_health():
+                    if health.is_global_position_ok and health.is_home_position_ok and health.is_armable:
+                        break
 
                 await action.arm()
                 assert mock.autopilot.armed
