@@ -53,9 +53,12 @@ def test_mavsdk_connects_arms_and_flies_offboard() -> None:
                 assert await asyncio.wait_for(_first(telemetry.subscribe_flight_mode()), 10) == FlightMode.HOLD
                 assert await asyncio.wait_for(_first(telemetry.subscribe_armed()), 10) is False
                 # The canonical MAVSDK example waits for this before arming.
-                async for health in telemetry.subscribe_health():
-                    if health.is_global_position_ok and health.is_home_position_ok and health.is_armable:
-                        break
+                async def ready() -> None:
+                    async for health in telemetry.subscribe_health():
+                        if health.is_global_position_ok and health.is_home_position_ok and health.is_armable:
+                            return
+
+                await asyncio.wait_for(ready(), 10)
 
                 await action.arm()
                 assert mock.autopilot.armed
