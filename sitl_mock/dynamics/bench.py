@@ -54,7 +54,7 @@ def run_inprocess(quick: bool = False) -> dict[str, Any]:
     """Speed figures: µs per 1 kHz physics tick and × real time, for a hover and an aggressive
     manoeuvre, calling ``step`` at 250 Hz (typical offboard rate) and at 1 kHz."""
     sim_s = 2.0 if quick else 10.0
-    repeats = 1 if quick else 3
+    repeats = 1 if quick else 5
     out: dict[str, Any] = {"physics_rate_hz": PHYSICS_RATE_HZ}
     cases = (
         ("fast_hover_step4ms", "fast", _hover, 0.004, True),
