@@ -85,3 +85,26 @@ def test_mavsdk_connects_arms_and_flies_offboard() -> None:
                 assert mock.autopilot.mode.name == "AUTO.LOITER"
 
     asyncio.run(scenario())
+
+
+def test_mavsdk_takeoff_and_land() -> None:
+    async def scenario() -> None:
+        port = free_udp_port()
+        config = MockConfig(udp_local_port=0, udp_remote=("127.0.0.1", port), speed=5.0)
+        async with MockAutopilot(config) as mock:
+            sdk_config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+            async with Mavsdk(sdk_config) as sdk:
+                await sdk.add_any_connection(f"udpin://127.0.0.1:{port}")
+                drone = await sdk.first_autopilot(timeout_s=10.0)
+                action = ActionAsync(drone)
+                await action.arm()
+                assert await action.get_takeoff_altitude() == pytest.approx(2.5)  # MIS_TAKEOFF_ALT
+                await action.takeoff()
+                await _sim_wait(mock, 6.0)
+                assert mock.autopilot.mode.name == "AUTO.LOITER"  # takeoff done → hold
+                assert mock.truth.position_ned_m[2] == pytest.approx(-2.5, abs=0.3)
+                await action.land()
+                await _sim_wait(mock, 8.0)
+                assert mock.truth.landed and not mock.autopilot.armed  # landed → auto-disarm
+
+    asyncio.run(scenario())
