@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import make_sim, tilt_rad
+from dynhelpers import make_sim, tilt_rad
 
 from sitl_mock.dynamics import AttitudeSetpoint, RateSetpoint, euler_to_quat, preset
 

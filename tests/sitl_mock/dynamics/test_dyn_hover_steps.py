@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import G, make_sim, tilt_rad
+from dynhelpers import G, make_sim, tilt_rad
 
 from sitl_mock.dynamics import AccelerationSetpoint, Spawn, preset
 from sitl_mock.dynamics.identify import accel_step_rise_time_s, attitude_bandwidth_hz

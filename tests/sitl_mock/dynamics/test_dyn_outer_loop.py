@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import make_sim
+from dynhelpers import make_sim
 
 from sitl_mock.dynamics import AccelerationSetpoint, Spawn, Wind
 

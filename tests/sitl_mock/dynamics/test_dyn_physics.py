@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import G, make_sim, rotation_matrix
+from dynhelpers import G, make_sim, rotation_matrix
 
 from sitl_mock.dynamics import AccelerationSetpoint, MotorsOff, PositionSetpoint, Spawn, preset
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import G, make_sim, tilt_rad
+from dynhelpers import G, make_sim, tilt_rad
 
 from sitl_mock.dynamics import (
     AccelerationSetpoint,
