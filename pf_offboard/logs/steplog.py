@@ -62,20 +62,19 @@ class StepRecord:
     event: str = ""  # "", "activated", "takeover", ...
 
     def __post_init__(self) -> None:
-        for f in _FIELDS:
-            value = getattr(self, f.name)
-            if f.name in _VECTOR_SIZES:
-                size = _VECTOR_SIZES[f.name]
-                vec = tuple(float(x) for x in np.asarray(value, dtype=float).reshape(-1))
+        for name, kind, size in _KINDS:
+            value = getattr(self, name)
+            if kind == "vec":
+                vec = tuple(map(float, value))
                 if len(vec) != size:
-                    raise ValueError(f"StepRecord.{f.name}: expected {size} components, got {len(vec)}")
-                object.__setattr__(self, f.name, vec)
-            elif f.name in _BOOL_FIELDS:
-                object.__setattr__(self, f.name, bool(value))
-            elif f.name in _STR_FIELDS:
-                object.__setattr__(self, f.name, str(value))
+                    raise ValueError(f"StepRecord.{name}: expected {size} components, got {len(vec)}")
+                object.__setattr__(self, name, vec)
+            elif kind == "bool":
+                object.__setattr__(self, name, bool(value))
+            elif kind == "str":
+                object.__setattr__(self, name, str(value))
             else:
-                object.__setattr__(self, f.name, float(value))
+                object.__setattr__(self, name, float(value))
 
 
 _VECTOR_SIZES: dict[str, int] = {
@@ -88,6 +87,14 @@ _VECTOR_SIZES: dict[str, int] = {
 _BOOL_FIELDS = frozenset({"active", "sat_tangential", "sat_transversal", "sat_tilt", "sat_thrust", "sat_approach_speed"})
 _STR_FIELDS = frozenset({"mode", "event"})
 _FIELDS = dataclasses.fields(StepRecord)
+# (name, kind, size) per field, in order: what __post_init__ normalises (computed once).
+_KINDS: tuple[tuple[str, str, int], ...] = tuple(
+    (f.name, "vec", _VECTOR_SIZES[f.name]) if f.name in _VECTOR_SIZES
+    else (f.name, "bool", 1) if f.name in _BOOL_FIELDS
+    else (f.name, "str", 1) if f.name in _STR_FIELDS
+    else (f.name, "float", 1)
+    for f in _FIELDS
+)  # fmt: skip
 _SUFFIX = {3: ("x", "y", "z"), 4: ("w", "x", "y", "z")}
 
 
