@@ -138,3 +138,22 @@ def test_replay_options_override_profile_detection() -> None:
     # read as PX4 the attitude setpoints carry only the yaw-rate feed-forward: they differ
     report = replay_flight(tlog, load_config(yaml), options=ReplayOptions(autopilot="px4", hover_thrust=1.0 / 3.5))
     assert report.profile == "px4" and not report.ok
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--tolerance", "nan"], "--tolerance: must be a finite number"),
+        (["--hover-thrust", "2"], "--hover-thrust: must be in [0.05, 0.95]"),
+        (["--config", "/nonexistent.yaml"], "--config: no such file"),
+    ],
+)
+def test_cli_replay_bad_flags(flags: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["replay", str(golden("paper_hover_px4")[0]), *flags]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_cli_replay_missing_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "x.yaml").write_bytes(golden("paper_hover_px4")[2].read_bytes())
+    assert main(["replay", str(tmp_path / "x.tlog")]) == 2
+    assert "x.tlog: cannot read" in capsys.readouterr().err
