@@ -20,19 +20,6 @@ def q_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
     return np.array(euler_to_quat(roll, pitch, yaw))
 
 
-def rotate_body_to_world(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate a body-frame vector into the world frame."""
-    w, x, y, z = (float(c) for c in q)
-    r = np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-    return r @ v
-
-
 def rotate_yaw(yaw: float, v: np.ndarray) -> np.ndarray:
     """Rotate a vector given in a yaw-only (heading) frame into NED."""
     c, s = math.cos(yaw), math.sin(yaw)

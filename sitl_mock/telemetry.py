@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_mock.rotations import euler_from_q, rotate_body_to_world
+from sitl_mock.rotations import euler_from_q
 
 if TYPE_CHECKING:
     from sitl_mock.autopilot import Autopilot
@@ -139,16 +139,15 @@ def local_position_ned(ap: Autopilot) -> mavlink.MAVLink_message:
 
 
 def odometry(ap: Autopilot) -> mavlink.MAVLink_message:
-    """PX4 style: frame_id LOCAL_NED (position), child_frame_id BODY_FRD (velocity, rates)."""
+    """Current PX4 style: EKF2 publishes NED position AND NED velocity (``VELOCITY_FRAME_NED``),
+    so frame_id = child_frame_id = LOCAL_NED; rates are body FRD."""
     s = ap.truth
     x, y, z = (float(v) for v in ap.est_position_ned_m)
-    q = np.asarray(s.q_ned_frd)
-    conj = np.array([q[0], -q[1], -q[2], -q[3]])
-    v_body = rotate_body_to_world(conj, np.asarray(s.velocity_ned_m_s))
+    vx, vy, vz = (float(v) for v in s.velocity_ned_m_s)
     p, qr, r = (float(v) for v in s.rates_frd_rad_s)
     return mavlink.MAVLink_odometry_message(
-        _time_usec(ap), mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD,
-        x, y, z, [float(c) for c in q], float(v_body[0]), float(v_body[1]), float(v_body[2]),
+        _time_usec(ap), mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED,
+        x, y, z, [float(c) for c in s.q_ned_frd], vx, vy, vz,
         p, qr, r, _NAN21, _NAN21, ap.reset_counter & 0xFF, mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT, 100,
     )
 

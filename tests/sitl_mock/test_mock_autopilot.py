@@ -423,8 +423,11 @@ def test_estimator_reset_jumps_estimate_not_vehicle() -> None:
 
 
 def test_odometry_frames_like_px4() -> None:
-    odo = make("px4").build(mavlink.MAVLINK_MSG_ID_ODOMETRY)
-    assert (odo.frame_id, odo.child_frame_id) == (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD)
+    ap = make("px4", spawn=SpawnSpec("throw", (0.0, 0.0, -20.0), (3.0, 1.0, 0.0)))
+    run(ap, 0.2)
+    odo = ap.build(mavlink.MAVLINK_MSG_ID_ODOMETRY)
+    assert (odo.frame_id, odo.child_frame_id) == (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED)
+    np.testing.assert_allclose([odo.vx, odo.vy, odo.vz], ap.truth.velocity_ned_m_s, atol=1e-5)  # NED velocity
 
 
 def test_scheduled_wind_gust_pushes_the_hovering_vehicle() -> None:
