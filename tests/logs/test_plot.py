@@ -64,3 +64,19 @@ def test_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "x.tlog").write_bytes(b"\0" * 20)
     assert main(["plot", str(tmp_path / "x.tlog"), "--out", str(tmp_path)]) == 2
     assert "no step log x.csv" in capsys.readouterr().err
+
+
+def test_runs_named_after_their_directory(tmp_path: Path) -> None:
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        circle_flight(tmp_path / d / "flight.csv", (0.0, -1.5), thrown=False)
+    pngs = make_figures([tmp_path / "a" / "flight.csv", tmp_path / "b" / "flight.csv"], tmp_path / "fig")
+    assert {p.name for p in pngs} >= {"a_tangential.png", "b_transversal.png"}
+
+
+def test_wrapped_arclength_is_not_drawn_as_a_jump() -> None:
+    from pf_offboard.logs.plot import _break_wraps
+
+    eta1 = np.array([14.0, 14.5, 15.0, 0.2, 0.7, 1.2])  # closed path of length ~15.2 m
+    out = _break_wraps(eta1)
+    assert np.isnan(out[2]) and np.all(np.isfinite(np.delete(out, 2)))
