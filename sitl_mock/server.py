@@ -76,6 +76,7 @@ def encode(mav: mavlink.MAVLink, msg: mavlink.MAVLink_message) -> bytes:
     return bytes(data)
 
 
+_TCP_BACKLOG_BYTES = 1 << 20
 _MTU = 1400  # like PX4, pack several messages into one UDP datagram up to about this size
 
 
@@ -390,8 +391,8 @@ class MockAutopilot:
         def write(data: bytes) -> None:
             if not data:
                 writer.close()
-            elif not writer.is_closing():
-                writer.write(data)
+            elif not writer.is_closing() and writer.transport.get_write_buffer_size() < _TCP_BACKLOG_BYTES:
+                writer.write(data)  # a client that stops reading loses telemetry, like a full serial buffer
 
         peer = _Peer(link, write)
         self._tcp_peers[link] = peer
