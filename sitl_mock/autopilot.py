@@ -687,9 +687,11 @@ class Autopilot:
         """The dynamics' position controller, target converted from the estimate to the true frame."""
         true = position_est - self.est_offset_ned_m
         key = (float(true[0]), float(true[1]), float(true[2]), tuple(velocity), yaw)
-        if self._position_sp_cache[0] != key:  # holds repeat the same target: skip re-validation
-            self._position_sp_cache = (key, PositionSetpoint(key[:3], key[3], yaw))
-        return self._position_sp_cache[1]
+        cached_key, cached = self._position_sp_cache
+        if cached is None or cached_key != key:  # holds repeat the same target: skip re-validation
+            cached = PositionSetpoint(key[:3], key[3], yaw)
+            self._position_sp_cache = (key, cached)
+        return cached
 
     def _control(self, dt_s: float) -> Setpoint:
         if not self.armed or self.motors_locked:
