@@ -38,6 +38,9 @@ EXIT_LINK = 3  # no heartbeat, refused command, lost telemetry
 EXIT_TAKEOVER = 4  # the operator took the vehicle back; we yielded
 
 
+KEEPALIVE_S = 0.1  # re-send the last setpoint when nothing went out for this long
+
+
 class Phase(enum.Enum):
     PREFLIGHT = "preflight"
     TAKEOFF = "takeoff"
@@ -633,7 +636,14 @@ class Bridge:
 
     # ------------------------------------------------------------------ periodic tasks (wall clock)
     async def keepalive(self) -> None:
-        """Re-send the last setpoint when no fresh state came for one period; watch staleness."""
+        """Proof-of-life guard and stale-state watchdog (wall clock).
+
+        While setpoints are computed on every fresh state sample, the last one is re-sent only
+        when nothing went out for ``KEEPALIVE_S`` (10 Hz, five times PX4's 2 Hz minimum and well
+        inside COM_OF_LOSS_T): re-sending a control setpoint faster would fly a stale command
+        whenever a sample is merely late (and would advance a lockstep simulator with it).
+        Before any state sample (preflight) the neutral setpoint goes out every setpoint period.
+        """
         period = 1.0 / self.options.setpoint_rate_hz
         while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
             await asyncio.sleep(period)
@@ -643,10 +653,11 @@ class Bridge:
                 await self._safe_exit()
                 self._finish(EXIT_LINK, "state went stale")
                 return
-            if self._last_setpoint is not None and now - self._last_send_wall >= period:
-                self._send(self._last_setpoint)
-            elif self._last_setpoint is None and self.phase is Phase.PREFLIGHT and self._neutral_allowed():
+            preflight = self.phase is Phase.PREFLIGHT and self._neutral_allowed()
+            if preflight and (self._last_setpoint is None or now - self._last_send_wall >= period):
                 self._send_neutral()
+            elif self._last_setpoint is not None and now - self._last_send_wall >= KEEPALIVE_S:
+                self._send(self._last_setpoint)
 
     async def heartbeat(self) -> None:
         while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):

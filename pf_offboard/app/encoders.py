@@ -35,6 +35,7 @@ _VEL_IGNORE = 0x038
 _ACC_IGNORE = 0x1C0
 _YAW_RATE_IGNORE = 0x800
 TYPE_MASK_ACCEL_YAW_YAWRATE = _POS_IGNORE | _VEL_IGNORE  # 0x03F
+TYPE_MASK_VEL_ACCEL_YAW_YAWRATE = _POS_IGNORE  # 0x007 (ArduPilot "velocity + acceleration")
 TYPE_MASK_POSITION_YAW = _VEL_IGNORE | _ACC_IGNORE | _YAW_RATE_IGNORE  # 0x9F8
 # ATTITUDE_TARGET_TYPEMASK bits
 _ROLL_RATE_IGNORE = 1
@@ -166,9 +167,18 @@ class Encoder:
     def _encode(self, cmd: CommandLike, est: StateEstimate, time_boot_ms: int) -> Encoded:
         if self.output_mode == "acceleration":
             accel_ned = frames.enu_to_ned(cmd.acceleration)
+            if self.profile.accel_with_velocity:
+                # ArduPilot integrates an acceleration-only target into its own velocity and
+                # position targets and corrects towards them (Z always). Giving it the measured
+                # velocity as the velocity target keeps those targets on the real vehicle, so
+                # its correction only acts on its own lag, not as a second outer loop.
+                vel_ned = frames.enu_to_ned(est.velocity_enu_m_s)
+                mask, vel = TYPE_MASK_VEL_ACCEL_YAW_YAWRATE, (float(vel_ned[0]), float(vel_ned[1]), float(vel_ned[2]))
+            else:
+                mask, vel = TYPE_MASK_ACCEL_YAW_YAWRATE, (0.0, 0.0, 0.0)
             msg = mavlink2.MAVLink_set_position_target_local_ned_message(
                 time_boot_ms, self.target_system, self.target_component, MAV_FRAME_LOCAL_NED,
-                TYPE_MASK_ACCEL_YAW_YAWRATE, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                mask, 0.0, 0.0, 0.0, *vel,
                 float(accel_ned[0]), float(accel_ned[1]), float(accel_ned[2]),
                 frames.yaw_enu_to_ned(float(cmd.yaw)), frames.yaw_rate_enu_to_ned(float(cmd.yaw_rate)),
             )  # fmt: skip

@@ -205,6 +205,11 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             )  # fmt: skip
             if profile.autopilot is Autopilot.ARDUPILOT:
                 await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
+                if settings.output_mode == "acceleration":
+                    jerk = min(await bridge.read_param("PSC_JERK_XY"), await bridge.read_param("PSC_JERK_Z"))
+                    if jerk < 20.0:
+                        print(f"pf-offboard fly: warning: ArduPilot jerk-limits acceleration targets (PSC_JERK_XY/Z = {jerk:g} m/s^3): "
+                              "expect lag and, at high gains, oscillation; raise PSC_JERK_XY/Z or use --output rates", file=stream)  # fmt: skip
 
         loop = asyncio.get_running_loop()
         loop.add_signal_handler(signal.SIGINT, bridge.request_stop)
@@ -236,7 +241,7 @@ async def _check_guid_options(bridge: Any, required: int, allow_set: bool, outpu
         raise InputError(
             "--set-guid-options",
             f"ArduPilot GUID_OPTIONS={value} lacks bit(s) {missing} needed by --output {output_mode} "
-            "(8: thrust as thrust; 16|32: no position/velocity correction); set them on the vehicle or pass --set-guid-options",
+            "(8: thrust as thrust; 16: no XY position correction); set them on the vehicle or pass --set-guid-options",
         )
     from pymavlink.dialects.v20 import common as mavlink2
 

@@ -61,6 +61,8 @@ class Profile:
     # body-rate feed-forward honoured next to an attitude quaternion: PX4 uses only the yaw rate,
     # ArduPilot uses all three (it advances its target attitude with them).
     attitude_rates_ff: tuple[bool, bool, bool]
+    # acceleration output sent with the measured velocity as velocity target (ArduPilot: see encoders)
+    accel_with_velocity: bool = False
 
     @property
     def name(self) -> str:
@@ -89,13 +91,14 @@ class Profile:
 
         - attitude / rates: bit 3 (8), "thrust as thrust"; without it ArduPilot reads the
           thrust field as a climb-rate demand and would fly a misread command.
-        - acceleration: bits 4 and 5 (16 | 32), "do not stabilise position / velocity XY";
-          otherwise ArduPilot integrates our accelerations into its own velocity/position target
-          and corrects towards it, a second outer loop fighting the path follower.
+        - acceleration: bit 4 (16), "do not stabilise position XY": ArduPilot integrates its
+          velocity target into a position target and corrects towards it; we send the measured
+          velocity as the velocity target (see encoders), and with bit 4 that XY position
+          correction, a second outer loop fighting the path follower, is off.
         """
         if self.autopilot is not Autopilot.ARDUPILOT:
             return 0
-        return 8 if output_mode in ("attitude", "rates") else 16 | 32
+        return 8 if output_mode in ("attitude", "rates") else 16
 
 
 PX4 = Profile(
@@ -120,6 +123,7 @@ ARDUPILOT = Profile(
     land_custom_mode=9,
     hover_thrust_param="MOT_THST_HOVER",
     attitude_rates_ff=(True, True, True),
+    accel_with_velocity=True,
 )
 
 PROFILES: dict[str, Profile] = {"px4": PX4, "ardupilot": ARDUPILOT}

@@ -116,3 +116,11 @@ def test_hold_setpoints() -> None:
     att = Encoder("attitude", PX4, 1, 1, hover_thrust=0.42).hold(est, 0).message
     assert att.thrust == pytest.approx(0.42)
     assert list(att.q) == pytest.approx(list(frames.quat_enu_flu_to_ned_frd(quat_about((0, 0, 1), 0.5))), abs=1e-7)
+
+
+def test_ardupilot_acceleration_carries_the_measured_velocity() -> None:
+    out = Encoder("acceleration", ARDUPILOT, 1, 1).encode(command(), estimate(velocity=(1.0, 2.0, -0.5)), 0)
+    m = out.message
+    assert m.type_mask == 0x007  # velocity + acceleration + yaw + yaw rate
+    assert (m.vx, m.vy, m.vz) == pytest.approx((2.0, 1.0, 0.5))  # ENU -> NED
+    assert (m.afx, m.afy, m.afz) == pytest.approx((-0.25, 0.5, -0.1))

@@ -39,7 +39,7 @@ def test_what_each_output_mode_needs() -> None:
     assert PX4.required_guid_options("rates") == 0
     assert ARDUPILOT.required_guid_options("attitude") == 8
     assert ARDUPILOT.required_guid_options("rates") == 8
-    assert ARDUPILOT.required_guid_options("acceleration") == 48
+    assert ARDUPILOT.required_guid_options("acceleration") == 16
     assert PX4.attitude_rates_ff == (False, False, True)  # PX4 drops roll/pitch FF next to a quaternion
     assert ARDUPILOT.attitude_rates_ff == (True, True, True)
     assert PX4.hover_thrust_param == "MPC_THR_HOVER" and ARDUPILOT.hover_thrust_param == "MOT_THST_HOVER"
