@@ -91,7 +91,12 @@ def level_attitude(yaw_enu_rad: float) -> NDArray[np.float64]:
 
 
 def _all_finite(values: Any) -> bool:
-    return bool(np.all(np.isfinite(np.asarray(values, dtype=float))))
+    """Scalars or short vectors (plain Python on purpose: numpy's per-call overhead dominates)."""
+    if isinstance(values, np.ndarray):
+        values = values.tolist()
+    if isinstance(values, (list, tuple)):
+        return all(map(math.isfinite, values))
+    return math.isfinite(values)
 
 
 def attitude_rate_command(

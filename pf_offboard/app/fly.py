@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import datetime as _dt
+import gc
 import math
 import signal
 import sys
@@ -152,6 +153,7 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     from pf_offboard.app.profiles import Autopilot, select_profile
     from pf_offboard.control import PathFollower
     from pf_offboard.logs.flightlog import FlightLog
+    from pf_offboard.logs.steplog import read_steplog
     from pf_offboard.logs.summary import summarize
 
     follower = PathFollower.from_config(config)
@@ -179,11 +181,10 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             state_timeout_s=settings.state_timeout_s,
             status=not args.quiet,
         )
-        records: list[Any] = []
         pipeline = Pipeline(follower, Encoder(settings.output_mode, profile, target.system, target.component), Estimator(args.state_source))
         bridge = Bridge(
             link, profile, pipeline, options, path.length_m, path.closed, path.lam_max,
-            on_step=lambda step: (records.append(step.record), flight_log.step(step.record)),
+            on_step=lambda step: flight_log.step(step.record),  # the CSV, not memory: flights can be long
             status_stream=stream,
         )  # fmt: skip
         link.start_reading(bridge.on_message)
@@ -213,6 +214,9 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
 
         loop = asyncio.get_running_loop()
         loop.add_signal_handler(signal.SIGINT, bridge.request_stop)
+        # The path, its caches and pymavlink's tables live for the whole flight: take them out of
+        # the cyclic collector's scans so full collections do not stall the 250 Hz loop.
+        gc.freeze()
         try:
             async with asyncio.TaskGroup() as tg:
                 flight = tg.create_task(bridge.fly(setup))
@@ -222,13 +226,15 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
                 result = await flight
         finally:
             loop.remove_signal_handler(signal.SIGINT)
-        summary = summarize(records) if records else None
-        _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
-        return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s)
     finally:
         link.close()
         if log is not None:
             log.close()
+    assert log is not None
+    records = read_steplog(log.paths.steps_csv)
+    summary = summarize(records) if records else None
+    _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
+    return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s)
 
 
 async def _check_guid_options(bridge: Any, required: int, allow_set: bool, output_mode: str) -> None:

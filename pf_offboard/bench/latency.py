@@ -13,6 +13,7 @@ controller, encoding and the app's bookkeeping (the telemetry log is not written
 from __future__ import annotations
 
 import asyncio
+import gc
 import io
 import math
 import multiprocessing
@@ -103,6 +104,7 @@ async def _app(port: int, samples: int, in_app: list[float]) -> None:
         path = follower.path
         bridge = Bridge(link, PX4, pipeline, options, path.length_m, path.closed, path.lam_max, status_stream=io.StringIO())
         bridge.phase = Phase.FOLLOWING
+        gc.freeze()  # as fly does before its loop
         done = asyncio.Event()
 
         def on_message(msg: Any) -> None:
