@@ -1,9 +1,9 @@
 """``pf-offboard demo``: the paper's path flown end to end against a ``sitl-mock`` on loopback.
 
 Starts ``python -m sitl_mock`` (PX4 profile, lockstep, ephemeral UDP port) in a subprocess, then
-runs exactly what ``pf-offboard fly`` runs against it over real MAVLink: take-off to the paper's
-start point (0, −1.5, 2) m, two laps at η2_ref = −1.5 m/s, hand-back in AUTO.LOITER. Prints the
-flight summary, writes the logs and the paper-style figures.
+runs exactly what ``pf-offboard fly`` runs against it over real MAVLink: take-off to 2 m below
+the paper's start point (0, −1.5, 2) m, convergence onto the path, two laps at η2_ref = −1.5 m/s,
+hand-back in AUTO.LOITER. Prints the flight summary, writes the logs and the paper-style figures.
 """
 
 from __future__ import annotations
@@ -33,15 +33,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def paper_config() -> Path:
-    """configs/paper.yaml from the source tree, else the copy shipped in the package."""
-    repo = Path(__file__).resolve().parents[2] / "configs" / "paper.yaml"
-    if repo.is_file():
-        return repo
+    """configs/paper.yaml: beside the package (source tree), in the working directory (the
+    README's ``pip install . && pf-offboard demo`` runs in the repository), or packaged."""
+    candidates = [Path(__file__).resolve().parents[2] / "configs" / "paper.yaml", Path.cwd() / "configs" / "paper.yaml"]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
     packaged = importlib.resources.files("pf_offboard.app") / "data" / "paper.yaml"
-    with importlib.resources.as_file(packaged) as p:
-        if Path(p).is_file():
+    if packaged.is_file():
+        with importlib.resources.as_file(packaged) as p:
             return Path(p)
-    raise InputError("--config", "configs/paper.yaml not found (not in a source tree and not packaged); pass --config")
+    raise InputError("--config", "configs/paper.yaml not found (run from the repository or pass --config)")
 
 
 DEMO_GAINS = {"transversal": {"bandwidth_hz": 2.0, "damping": 0.7}, "tangential": {"bandwidth_hz": 2.0, "damping": 0.8}}

@@ -169,3 +169,75 @@ def test_replay_recomputes_every_setpoint_that_flew(tmp_path, output: str) -> No
     print("\n" + "\n".join(report.lines()))
     assert report.steps == len(outcome.records) > 900
     assert report.ok
+
+
+def test_stale_state_stops_following_and_exits_3(tmp_path) -> None:
+    config = write_config(tmp_path)
+    cfg = mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)), faults=FaultConfig(blackout_s=(3.0, 60.0)))
+    with spawn(cfg) as mock:
+        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--duration", "30")
+    assert outcome.exit_code == 3
+    assert "stale" in outcome.reason
+    last = outcome.records[-1]
+    assert 2.9 <= last.time_s <= 3.1  # no step without fresh state after the blackout began
+
+
+def _python_m(*args: str) -> list[str]:
+    import sys
+
+    return [sys.executable, "-m", *args]
+
+
+def test_ctrl_c_hands_back_and_exits_0(tmp_path) -> None:
+    import signal
+    import subprocess
+
+    config = write_config(tmp_path)
+    with spawn(mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)))) as mock:
+        proc = subprocess.Popen(
+            _python_m("pf_offboard", "fly", "--connect", f"udpout:127.0.0.1:{mock.ports.udp}", "--config", str(config),
+                      "--airborne", "--log-dir", str(tmp_path / "log")),  # fmt: skip
+            stderr=subprocess.PIPE, text=True,
+        )
+        assert proc.stderr is not None
+        lines = []
+        for line in proc.stderr:  # the plain (non-TTY) status line comes once a second
+            lines.append(line)
+            if line.startswith("[following]"):
+                proc.send_signal(signal.SIGINT)
+                break
+        _, err = proc.communicate(timeout=30)
+        text = "".join(lines) + err
+        assert proc.returncode == 0, text
+        assert mock.process.poll() is None
+    assert "stop requested (Ctrl-C); handed back in AUTO.LOITER" in text
+    entries = read_tlog(tmp_path / "log" / "flight.tlog")
+    modes = [e.message.custom_mode for e in entries if e.direction == "in" and e.message.get_type() == "HEARTBEAT"]
+    assert modes[-1] == PX4.hold_custom_mode
+
+
+def test_demo_command_runs_end_to_end(tmp_path) -> None:
+    import subprocess
+
+    done = subprocess.run(
+        _python_m("pf_offboard", "demo", "--laps", "0.5", "--no-plots", "--quiet", "--log-dir", str(tmp_path)),
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "handed back in AUTO.LOITER" in done.stderr and f"logs: {tmp_path}" in done.stderr
+    assert (tmp_path / "flight.tlog").stat().st_size > 0 and (tmp_path / "flight.csv").stat().st_size > 0
+
+
+def test_odometry_estimator_reset_resets_the_follower(tmp_path) -> None:
+    config = write_config(tmp_path)
+    cfg = mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)), faults=FaultConfig(estimator_reset_at_s=6.0))
+    with spawn(cfg) as mock:
+        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--state-source", "odometry", "--duration", "14")
+    assert outcome.exit_code == 0, outcome.reason
+    resets = [r for r in outcome.records if "estimator_reset" in r.event]
+    assert len(resets) == 1 and 6.0 <= resets[0].time_s <= 6.1
+    before = [r.cross_track_m for r in outcome.records if 5.5 <= r.time_s < 6.0]
+    jump = resets[0].cross_track_m
+    after = [r.cross_track_m for r in outcome.records if r.time_s >= outcome.records[-1].time_s - 1.0]
+    print(f"\ncross-track before the reset {max(before) * 1000:.2f} mm, right after {jump:.3f} m, last second {max(after) * 1000:.2f} mm")
+    assert max(before) < 0.01 and jump > 0.5 and max(after) < 0.01
