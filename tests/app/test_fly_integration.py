@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 from sitl_mock.config import FaultConfig, MockConfig, SpawnSpec
 from sitl_mock.runner import run_in_thread, spawn
 
-from pf_offboard import frames
 from pf_offboard.app.profiles import PX4
 from pf_offboard.logs.tlog import read_tlog
 
@@ -119,7 +116,6 @@ def test_takeover_stops_setpoints_at_once_and_never_reengages(tmp_path) -> None:
                 seen = i
                 break
     assert seen is not None, "no HEARTBEAT showing the takeover"
-    takeover_time_ms = entries[seen].message  # noqa: F841  (HEARTBEAT has no timestamp)
     after = [e.message.get_type() for e in entries[seen + 1 :] if e.direction == "out"]
     assert "SET_POSITION_TARGET_LOCAL_NED" not in after and "SET_ATTITUDE_TARGET" not in after
     assert "COMMAND_LONG" not in after  # no mode request: never re-engage
