@@ -207,7 +207,9 @@ def _yaw(data: Any, frame: str, closed: bool) -> YawSpec:
 
 
 def _limits(data: Any) -> Limits:
-    d = _section(data, "limits", ("max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s"))
+    d = _section(
+        data, "limits", ("max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s", "max_tilt_rate_rad_s")
+    )
     default = Limits()
     g = GRAVITY_M_S2
     tilt = _number(d, "max_tilt_deg", "limits.max_tilt_deg", default.max_tilt_deg, 0.0, 80.0, lo_open=True)
@@ -218,7 +220,11 @@ def _limits(data: Any) -> Limits:
     vapp = _number(
         d, "max_approach_speed_m_s", "limits.max_approach_speed_m_s", default.max_approach_speed_m_s, 0.05, 20.0
     )
-    return Limits(tilt, tmin, tmax, vapp)  # type: ignore[arg-type]
+    # null: no slew limit (the paper's linear laws everywhere; only for an ideal inner loop)
+    rate = _number(
+        d, "max_tilt_rate_rad_s", "limits.max_tilt_rate_rad_s", default.max_tilt_rate_rad_s, 0.1, 100.0, nullable=True
+    )
+    return Limits(tilt, tmin, tmax, vapp, rate)  # type: ignore[arg-type]
 
 
 def _flight(data: Any) -> FlightConfig:

@@ -53,6 +53,31 @@ class ControlLaw:
         self.u_max = limits.guaranteed_accel_m_s2
         self.a_dec = APPROACH_DECEL_SHARE * self.u_max
         self.v_app = limits.max_approach_speed_m_s
+        # Slew capability of the inner loops: jerk J = g * max_tilt_rate. The velocity loops
+        # become square-root controllers above |dv| = J/k^2 (see shape()); inf: linear.
+        rate = limits.max_tilt_rate_rad_s
+        self.jerk = G * rate if rate is not None else math.inf
+        self.dv_lin = self.jerk / (self.kd * self.kd)
+        self.dv_lin_t = self.jerk / (self.kd_t * self.kd_t)
+        # Position level: the approach speed may not change faster than the (scheduled) velocity
+        # loop can follow: time scale e/v_d >= kappa * sqrt(v_d / 2J) with kappa = kd^2/kp (the
+        # paper's ratio of the two loops' time scales in the linear region) gives
+        # v_d <= (2J)^(1/3) (e/kappa)^(2/3); it meets the linear k_pos e at e_lin.
+        kappa = self.kd * self.kd / self.kp
+        self.c_cbrt = (2.0 * self.jerk) ** (1.0 / 3.0) / kappa ** (2.0 / 3.0) if math.isfinite(self.jerk) else math.inf
+
+    def shape(self, k: float, dv_lin: float, dv: float) -> float:
+        """Velocity-loop output magnitude for a velocity error ``dv >= 0``.
+
+        ``k dv`` (the paper's linear gain) for ``dv <= dv_lin = J/k^2``, above that
+        ``sqrt(2 J (dv - dv_lin/2))`` (C1 at the junction): the correction a loop with jerk J can
+        remove without overshoot, i.e. the effective gain ``u/dv`` falls as ``sqrt(2J/dv)`` so a
+        large error is corrected at a lower bandwidth the vehicle can slew, and its demand never
+        swings faster than ``|du/dt| ~ J``.
+        """
+        if dv <= dv_lin:
+            return k * dv
+        return math.sqrt(2.0 * self.jerk * (dv - 0.5 * dv_lin))
 
     # ------------------------------------------------------------------ building blocks
     def approach_speed(self, dist_m: float) -> tuple[float, bool]:
@@ -60,6 +85,10 @@ class ControlLaw:
         lin = self.k_pos * dist_m
         brake = math.sqrt(2.0 * self.a_dec * dist_m)
         v = lin if lin < brake else brake
+        if self.c_cbrt < math.inf:
+            jerk = self.c_cbrt * dist_m ** (2.0 / 3.0)
+            if jerk < v:
+                v = jerk
         if self.v_app < v:
             return self.v_app, True
         return v, False
@@ -82,13 +111,25 @@ class ControlLaw:
         else:
             vx = vy = 0.0
             limited = False
-        ux = self.kd * (vx - xi2)
-        uy = self.kd * (vy - phi2)
-        n = math.hypot(ux, uy)
+        ex, ey = vx - xi2, vy - phi2
+        dv = math.hypot(ex, ey)
+        if dv <= self.dv_lin:
+            ux, uy = self.kd * ex, self.kd * ey
+            n = self.kd * dv
+        else:
+            n = self.shape(self.kd, self.dv_lin, dv)
+            ux, uy = ex * (n / dv), ey * (n / dv)
         if n > self.u_max:
             k = self.u_max / n
             return ux * k, uy * k, True, limited
         return ux, uy, False, limited
+
+    def tangential(self, eta2_ref: float, eta2: float) -> float:
+        """u_eta of the tangential velocity loop (linear near eta2_ref, square-root beyond)."""
+        dv = eta2_ref - eta2
+        if abs(dv) <= self.dv_lin_t:
+            return self.kd_t * dv
+        return math.copysign(self.shape(self.kd_t, self.dv_lin_t, abs(dv)), dv)
 
     # ------------------------------------------------------------------ the two laws
     def tube(self, terms: ExactTerms, eta2_ref: float) -> LawOutput | None:
@@ -100,7 +141,7 @@ class ControlLaw:
         st = terms.state
         al1, al2, al3 = terms.alpha
         u_xi, u_phi, reduced, limited = self.transversal(st.xi1, st.xi2, st.phi1, st.phi2)
-        u_eta = self.kd_t * (eta2_ref - st.eta2)
+        u_eta = self.tangential(eta2_ref, st.eta2)
         # a_b: keeps (eta2, xi2, phi2) constant; a_t: transversal correction
         bx = -(m1[0] * al1 + m2[0] * al2 + m3[0] * al3)
         by = -(m1[1] * al1 + m2[1] * al2 + m3[1] * al3)
@@ -172,10 +213,12 @@ class ControlLaw:
         ez = -k * r[2] - v[2]
         et = ex * t[0] + ey * t[1] + ez * t[2]
         # across t
-        px = self.kd * (ex - et * t[0])
-        py = self.kd * (ey - et * t[1])
-        pz = self.kd * (ez - et * t[2])
-        n = math.sqrt(px * px + py * py + pz * pz)
+        px, py, pz = ex - et * t[0], ey - et * t[1], ez - et * t[2]
+        dv = math.sqrt(px * px + py * py + pz * pz)
+        n = self.shape(self.kd, self.dv_lin, dv)
+        if dv > 0.0:
+            c = n / dv
+            px, py, pz = px * c, py * c, pz * c
         reduced = False
         if n > self.u_max:
             c = self.u_max / n
@@ -183,7 +226,7 @@ class ControlLaw:
             n = self.u_max
             reduced = True
         # along t
-        at = self.kd_t * (et + eta2_ref)
+        at = self.tangential(eta2_ref, -et)
         room = math.sqrt(max(self.u_max * self.u_max - n * n, 0.0))
         clipped = False
         if at > room:

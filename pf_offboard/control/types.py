@@ -88,10 +88,15 @@ class Limits:
     min_thrust_m_s2: float = 2.0
     max_thrust_m_s2: float = 20.0
     max_approach_speed_m_s: float = 2.0
+    max_tilt_rate_rad_s: float | None = 2.0
 
     def __post_init__(self) -> None:
         for name in ("max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s"):
             _finite(name, getattr(self, name))
+        if self.max_tilt_rate_rad_s is not None:
+            rate = _finite("max_tilt_rate_rad_s", self.max_tilt_rate_rad_s)
+            if not 0.1 <= rate <= 100.0:
+                raise InputError("max_tilt_rate_rad_s", f"must be in [0.1, 100] rad/s (or None: no slew limit), got {rate}")
         if not 0.0 < self.max_tilt_deg <= 80.0:
             raise InputError("max_tilt_deg", f"must be in (0, 80] deg, got {self.max_tilt_deg}")
         # > 0: at zero thrust the attitude (body z along f) is undefined

@@ -60,11 +60,22 @@ def random_start(path: Path, rng: np.random.Generator):
     return y, w / np.linalg.norm(w) * rng.uniform(0.0, 4.0)
 
 
-def test_attractive_from_200_random_starts_with_limits(paper_path):
+# (planning tilt rate, approach-speed tolerance): None is the ideal double integrator with the
+# paper's linear velocity loops everywhere; with the default slew limit the velocity loop is a
+# square-root (jerk-limited) controller for large errors, whose tracking lag of a turning desired
+# velocity lets the approach speed exceed the limit slightly more (worst of the 200: +0.065 m/s).
+@pytest.mark.parametrize("tilt_rate,approach_tol", [(None, 0.05), (Limits().max_tilt_rate_rad_s, 0.1)])
+def test_attractive_from_200_random_starts_with_limits(paper_path, tilt_rate, approach_tol):
     """Up to 5 m off and 4 m/s in any direction: converge to ||(xi1, phi1)|| < 1 cm and
     |eta2 - eta2_ref| < 1 cm/s; every command feasible; approach speed within the limit."""
     rng = np.random.default_rng(20260522)
-    limits = Limits(max_tilt_deg=35.0, min_thrust_m_s2=2.0, max_thrust_m_s2=20.0, max_approach_speed_m_s=2.0)
+    limits = Limits(
+        max_tilt_deg=35.0,
+        min_thrust_m_s2=2.0,
+        max_thrust_m_s2=20.0,
+        max_approach_speed_m_s=2.0,
+        max_tilt_rate_rad_s=tilt_rate,
+    )
     dt = 0.005
     times = []
     for i in range(200):
@@ -81,7 +92,7 @@ def test_attractive_from_200_random_starts_with_limits(paper_path):
             if k * dt > 1.5 and c.cross_track_m > 1e-3:
                 # after the initial velocity has been dealt with, never approach faster than allowed
                 r = y - paper_path.eval(c.lam).sigma
-                assert -(r @ v) / np.linalg.norm(r) <= limits.max_approach_speed_m_s + 0.05, (i, k)
+                assert -(r @ v) / np.linalg.norm(r) <= limits.max_approach_speed_m_s + approach_tol, (i, k)
             if math.hypot(st.xi1, st.phi1) < 0.01 and abs(st.eta2 - speed) < 0.01:
                 if converged_at is None:
                     converged_at = k * dt
@@ -274,23 +285,46 @@ def test_attractive_on_the_other_shipped_paths(name):
         assert converged_at is not None, (name, i, st)
 
 
-def test_transversal_correction_is_delivered_in_full_while_tangential_gives_way(paper_path):
-    """3 mm off the path at rest with eta2_ref = 1.5 m/s: the tangential loop asks for ~60 m/s^2,
-    far beyond the limits; the transversal PD (-kp e - kd e_dot) is still delivered exactly and the
-    tangential acceleration is what is cut back."""
-    f = PathFollower(paper_path, speed=1.5)
+@pytest.mark.parametrize(
+    "offset_m,tilt_rate,max_tilt_deg",
+    [(0.003, None, 35.0), (0.0002, Limits().max_tilt_rate_rad_s, 20.0), (0.003, Limits().max_tilt_rate_rad_s, 20.0)],
+)
+def test_transversal_correction_is_delivered_in_full_while_tangential_gives_way(
+    paper_path, offset_m, tilt_rate, max_tilt_deg
+):
+    """Off the path at rest with eta2_ref = 1.5 m/s: the tangential loop asks for far more than the
+    limits allow; the transversal correction is still delivered exactly and the tangential
+    acceleration is what is cut back. Without a slew limit (tilt_rate None) the correction is the
+    paper's PD -kp e - kd e_dot. With the default slew limit it is that PD inside the linear
+    neighbourhood (e < 2J/(kd kp) = 0.5 mm, |dv| < J/kd^2 = 7 mm/s; 0.2 mm off), and the square-root
+    law's smaller value 3 mm off; tilt and thrust limits are tighter there (20 deg, 12 m/s^2) so
+    that the (also slew-limited, 7.7 m/s^2) tangential demand exceeds what is left."""
+    f = PathFollower(paper_path, speed=1.5, limits=Limits(
+            max_tilt_deg=max_tilt_deg,
+            max_thrust_m_s2=20.0 if tilt_rate is None else 12.0,
+            max_tilt_rate_rad_s=tilt_rate,
+        ),
+    )
     lam = 0.25 * paper_path.lam_max
     fr = paper_path.frame(lam)
-    y = paper_path.eval(lam).sigma + 0.003 * fr.e2
+    y = paper_path.eval(lam).sigma + offset_m * fr.e2
     v = np.zeros(3)
     c = f.update(y, v)
     alpha, beta = f.decoupling(y, v)
     u = beta @ c.acceleration + alpha
     st = c.state
     kp, kd = f.gains.transversal_kp, f.gains.transversal_kd
-    assert u[1] == pytest.approx(-kp * st.xi1 - kd * st.xi2, rel=1e-9)
-    assert u[2] == pytest.approx(-kp * st.phi1 - kd * st.phi2, abs=1e-9)
-    u_eta_wanted = f.gains.tangential_kd * (1.5 - st.eta2)
+    u_xi, u_phi, reduced, _ = f.law.transversal(st.xi1, st.xi2, st.phi1, st.phi2)
+    assert not reduced
+    assert u[1] == pytest.approx(u_xi, rel=1e-9)
+    assert u[2] == pytest.approx(u_phi, abs=1e-9)
+    if tilt_rate is None or offset_m < 0.0005:
+        assert u[1] == pytest.approx(-kp * st.xi1 - kd * st.xi2, rel=1e-9)
+        assert u[2] == pytest.approx(-kp * st.phi1 - kd * st.phi2, abs=1e-9)
+    else:
+        # beyond the linear neighbourhood the correction is smaller than the linear PD's
+        assert 0.0 < -u_xi < kp * abs(st.xi1)
+    u_eta_wanted = f.law.tangential(1.5, st.eta2)
     assert 0.0 < u[0] < 0.5 * u_eta_wanted
     assert c.saturation.tangential and not c.saturation.transversal
     assert c.saturation.tilt or c.saturation.thrust  # the tangential part went to the boundary
