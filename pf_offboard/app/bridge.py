@@ -246,6 +246,8 @@ class Bridge:
         self.last_statustext = ""
         # before activation, stream the follower's own (inactive) setpoints as proof of life
         self._stream_follow_before_active = False
+        if link.first_heartbeat is not None:  # mode and armed state known from the start
+            self._on_heartbeat(link.first_heartbeat)
 
     # ------------------------------------------------------------------ receive path (event loop callback)
     def on_message(self, msg: Any) -> None:

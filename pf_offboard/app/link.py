@@ -118,6 +118,7 @@ class Link:
         self._handler: Callable[[Any], None] | None = None
         self._reading = False
         self.error: LinkError | None = None
+        self.first_heartbeat: Any = None  # the HEARTBEAT that identified the target
 
     @classmethod
     def open(cls, endpoint: Endpoint, source_system: int = 1) -> Link:
@@ -192,6 +193,7 @@ class Link:
                 return
             if target_system is not None and msg.get_srcSystem() != target_system:
                 return
+            self.first_heartbeat = msg
             found.set_result(VehicleId(msg.get_srcSystem(), msg.get_srcComponent(), msg.autopilot, msg.type))
 
         self.start_reading(handler)

@@ -237,3 +237,17 @@ def test_odometry_estimator_reset_resets_the_follower(tmp_path) -> None:
     after = [r.cross_track_m for r in outcome.records if r.time_s >= outcome.records[-1].time_s - 1.0]
     print(f"\ncross-track before the reset {max(before) * 1000:.2f} mm, right after {jump:.3f} m, last second {max(after) * 1000:.2f} mm")
     assert max(before) < 0.01 and jump > 0.5 and max(after) < 0.01
+
+
+def test_real_time_clock_keeps_up_at_250_hz(tmp_path) -> None:
+    """Not lockstep: the mock runs on the wall clock like a real autopilot; the app keeps up."""
+    config = write_config(tmp_path)
+    cfg = MockConfig(profile="px4", spawn=SpawnSpec.parse("hover:" + ",".join(map(str, HOVER_NED))), udp_local_port=0, udp_remote=None)
+    with spawn(cfg) as mock:
+        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--output", "rates", "--duration", "4")
+    assert outcome.exit_code == 0, outcome.reason
+    active = [r for r in outcome.records if r.active]
+    rate = len(active) / (active[-1].time_s - active[0].time_s)
+    print(f"\nreal time: {rate:.0f} steps/s, converged after {outcome.summary.convergence_time_s} s")
+    assert rate >= 0.9 * RATE_HZ  # a setpoint for (nearly) every state sample
+    assert outcome.summary.convergence_time_s is not None and outcome.summary.convergence_time_s < 3.0
