@@ -70,3 +70,28 @@ def test_param_encodings() -> None:
     assert packed != 8.0 and param_value_decode(packed, 6, bytewise=True) == 8.0
     assert param_value_encode(8, 6, bytewise=False) == 8.0
     assert param_value_decode(0.37, 9, bytewise=True) == pytest.approx(0.37)
+
+
+def test_status_line_shows_mode_and_transverse_state() -> None:
+    import io
+    from types import SimpleNamespace
+
+    from pf_offboard.app.bridge import Bridge, BridgeOptions
+    from pf_offboard.app.encoders import Encoder
+    from pf_offboard.app.pipeline import Pipeline
+    from pf_offboard.app.profiles import PX4
+
+    from .helpers import local_position
+    from .test_pipeline import FakeFollower
+
+    heartbeat = SimpleNamespace(custom_mode=393216, base_mode=0x91, get_srcComponent=lambda: 1)
+    link = SimpleNamespace(target=None, first_heartbeat=heartbeat)
+    pipe = Pipeline(FakeFollower(), Encoder("acceleration", PX4, 1, 1))
+    bridge = Bridge(link, PX4, pipe, BridgeOptions("airborne", math.nan, EndSpec()), 10.0, True, 1.0, status_stream=io.StringIO())
+    assert bridge.status_text().startswith("[preflight] OFFBOARD armed")
+    pipe.on_message(local_position(0))
+    bridge.last_step = pipe.step()
+    text = bridge.status_text()
+    for label in ("η1", "η2", "ξ1", "φ1", "e ", "rate"):
+        assert label in text
+    assert "ξ1 +0.010 m" in text and "φ1 -0.020 m" in text
