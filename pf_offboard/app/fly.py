@@ -22,6 +22,7 @@ from typing import Any, TextIO
 from pf_offboard.errors import InputError, LinkError
 
 LAUNCHES = ("takeoff", "airborne", "throw")
+FROM_CONFIG = -1.0  # `--takeoff` / `--throw` without a height: take it from the config's flight: section
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,9 +31,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(PX4 SITL: udpin:0.0.0.0:14540; ArduPilot SITL: tcp:127.0.0.1:5760)")  # fmt: skip
     parser.add_argument("--config", required=True, metavar="YAML", help="path, speed, gains, limits and flight: settings")
     launch = parser.add_mutually_exclusive_group(required=True)
-    launch.add_argument("--takeoff", type=float, metavar="H", help="arm, take off to H metres, then follow")
+    launch.add_argument("--takeoff", type=float, nargs="?", const=FROM_CONFIG, metavar="H",
+                        help="arm, take off to H metres (default flight.takeoff_altitude_m), then follow")  # fmt: skip
     launch.add_argument("--airborne", action="store_true", help="the vehicle is flying: switch to OFFBOARD/GUIDED and follow")
-    launch.add_argument("--throw", type=float, metavar="H", help="activate when a thrown vehicle crosses H metres")
+    launch.add_argument("--throw", type=float, nargs="?", const=FROM_CONFIG, metavar="H",
+                        help="activate when a thrown vehicle crosses H metres (default flight.throw_activation_height_m)")  # fmt: skip
     parser.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: flight.output_mode)")
     parser.add_argument("--autopilot", choices=("auto", "px4", "ardupilot"), default="auto", help="default: from HEARTBEAT")
     parser.add_argument("--laps", type=float, help="end after N laps")
@@ -91,6 +94,19 @@ def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
     return s
 
 
+def _heights_from_config(args: argparse.Namespace, config: Any) -> None:
+    """Fill ``--takeoff`` / ``--throw`` given without a height from ``flight:``."""
+    flight = getattr(config, "flight", None)
+    if args.takeoff == FROM_CONFIG:
+        args.takeoff = getattr(flight, "takeoff_altitude_m", None)
+        if args.takeoff is None:
+            raise InputError("--takeoff", "no height given and the config has no flight.takeoff_altitude_m")
+    if args.throw == FROM_CONFIG:
+        args.throw = getattr(flight, "throw_activation_height_m", None)
+        if args.throw is None:
+            raise InputError("--throw", "no height given and the config has no flight.throw_activation_height_m")
+
+
 def _check_args(args: argparse.Namespace) -> None:
     for flag, value in (("--takeoff", args.takeoff), ("--throw", args.throw)):
         if value is not None and not (math.isfinite(value) and 0.3 <= value <= 100.0):
@@ -131,8 +147,9 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None) -> FlyOut
     from pf_offboard.config import load_config
 
     endpoint = parse_endpoint(args.connect)  # InputError before anything is opened
-    _check_args(args)
     config = load_config(args.config)
+    _heights_from_config(args, config)
+    _check_args(args)
     settings = flight_settings(config, args)
     stream = status_stream if status_stream is not None else sys.stderr
     try:

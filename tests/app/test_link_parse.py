@@ -47,3 +47,38 @@ def test_malformed_endpoints(text: str, fragment: str) -> None:
         parse_endpoint(text)
     assert info.value.field == "--connect"
     assert fragment in info.value.reason
+
+
+def test_fly_flags_and_flight_section(tmp_path) -> None:
+    """Launch heights from the config, flag validation: InputError naming the flag, nothing opened."""
+    import argparse
+
+    import yaml
+
+    from pf_offboard.app.fly import _check_args, _heights_from_config, add_arguments, flight_settings
+    from pf_offboard.config import load_config
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    data = yaml.safe_load(open("configs/paper.yaml"))
+    data["flight"].update(takeoff_altitude_m=2.5, output_mode="rates", attitude_time_constant_s=0.05)
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(data))
+    config = load_config(path)
+    args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", str(path), "--takeoff"])
+    _heights_from_config(args, config)
+    assert args.takeoff == 2.5
+    settings = flight_settings(config, args)
+    assert (settings.output_mode, settings.attitude_time_constant_s, settings.end_action) == ("rates", 0.05, "hold")
+    args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", str(path), "--throw"])
+    with pytest.raises(InputError) as info:
+        _heights_from_config(args, config)  # paper.yaml has no throw activation height
+    assert info.value.field == "--throw"
+    for flags, field in ((["--takeoff", "0.1"], "--takeoff"), (["--airborne", "--laps", "0"], "--laps"),
+                         (["--airborne", "--duration", "nan"], "--duration")):  # fmt: skip
+        args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", str(path), *flags])
+        with pytest.raises(InputError) as info:
+            _check_args(args)
+        assert info.value.field == field
+    args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", str(path), "--airborne", "--output", "attitude"])
+    assert flight_settings(config, args).output_mode == "attitude"  # the flag wins
