@@ -7,6 +7,12 @@ Near the path the transversal law is the paper's linear PD ``u = -kp e - kd e_do
 acceleration every direction can deliver. The tangential law is the velocity loop
 ``u_eta = kd_t (eta2_ref - eta2)``.
 
+Slew limit (``limits.max_tilt_rate_rad_s``, jerk ``J = g * rate``): both velocity loops become
+square-root controllers beyond ``|dv| = J/k^2`` and the approach-speed profile is bounded by
+``(2J)^(1/3) (|e|/kappa)^(2/3)``, so the demand never swings faster than the vehicle can tilt; the
+paper's linear laws act unchanged in a small neighbourhood of the path (docs/controller.md).
+Time-invariant: no state.
+
 Priority allocation in acceleration space: with ``M = beta^-1`` (columns m1, m2, m3),
 ``a = -M alpha + m2 u_xi + m3 u_phi + m1 u_eta``. The feasible thrust set is convex, so the
 ``u_eta`` that keep ``a`` feasible form one interval: u_eta is clipped into it. If the interval is

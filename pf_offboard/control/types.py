@@ -82,6 +82,12 @@ class Limits:
     ``|f| <= max_thrust_m_s2``, vertical component ``f_z >= min_thrust_m_s2`` (which implies
     ``|f| >= min_thrust_m_s2``), and the commanded speed of approach to the path <=
     ``max_approach_speed_m_s``.
+
+    ``max_tilt_rate_rad_s`` is the slew limit: the rate (rad/s) at which the controller plans to
+    turn the thrust vector, i.e. a jerk ``J = g * max_tilt_rate_rad_s``. Velocity corrections are
+    shaped (square-root law beyond ``J/kd^2``) so that the demand never swings faster than that;
+    near the path the paper's linear laws act unchanged. Choose about 1/3-1/2 of what the vehicle
+    really slews. ``None``: no shaping (the paper's laws everywhere; ideal inner loop only).
     """
 
     max_tilt_deg: float = 35.0
