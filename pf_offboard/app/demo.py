@@ -25,9 +25,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: from the config)")
     parser.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4", help="mock profile (default px4)")
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/demo-<UTC timestamp>/")
-    parser.add_argument("--paper-gains", action="store_true",
-                        help="fly the config's own gains and setpoint rate (the paper's 6 Hz / 4 Hz need a faster "
-                        "inner loop than sitl-mock's vehicle has); default: 2 Hz / 2 Hz at 250 Hz")  # fmt: skip
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
     parser.add_argument("--quiet", action="store_true", help="no status line")
 
@@ -46,26 +43,6 @@ def paper_config() -> Path:
     raise InputError("--config", "configs/paper.yaml not found (run from the repository or pass --config)")
 
 
-DEMO_GAINS = {"transversal": {"bandwidth_hz": 2.0, "damping": 0.7}, "tangential": {"bandwidth_hz": 2.0, "damping": 0.8}}
-
-
-def demo_config(source: Path, log_dir: Path) -> Path:
-    """The source config with gains and rates the mock's vehicle flies stably, written into the
-    log directory (where ``fly`` keeps the config it flew, so ``replay`` finds it)."""
-    import yaml
-
-    data = yaml.safe_load(source.read_text(encoding="utf-8"))
-    data["gains"] = DEMO_GAINS
-    data.setdefault("flight", {})
-    data["flight"].update({"setpoint_rate_hz": 250.0, "attitude_time_constant_s": 0.05})
-    log_dir.mkdir(parents=True, exist_ok=True)
-    out = log_dir / "flight.yaml"
-    header = (f"# {source.name} with the demo's gains (2 Hz / 2 Hz at 250 Hz): the paper's 6 Hz / 4 Hz need a\n"
-              "# faster inner loop than sitl-mock's vehicle has (pf-offboard demo --paper-gains to try them).\n")  # fmt: skip
-    out.write_text(header + yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
     from sitl_mock.config import MockConfig, SpawnSpec
     from sitl_mock.runner import spawn
@@ -75,12 +52,11 @@ def run(args: argparse.Namespace) -> int:
     from pf_offboard.app.fly import default_log_dir, fly
     from pf_offboard.config import load_config
 
-    source = Path(args.config) if args.config else paper_config()
+    config_path = Path(args.config) if args.config else paper_config()
     if not (args.laps > 0):
         raise InputError("--laps", f"must be > 0, got {args.laps}")
     stamped = default_log_dir()
     log_dir = Path(args.log_dir) if args.log_dir else stamped.with_name("demo-" + stamped.name)
-    config_path = source if args.paper_gains else demo_config(source, log_dir)
     config = load_config(config_path)
     rate_hz = config.flight.setpoint_rate_hz
     # PX4: lockstep (one physics step per setpoint: as fast as the host allows, deterministic).

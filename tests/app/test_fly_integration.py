@@ -10,7 +10,7 @@ from sitl_mock.runner import run_in_thread, spawn
 from pf_offboard.app.profiles import PX4
 from pf_offboard.logs.tlog import read_tlog
 
-from .flights import RATE_HZ, gains, lap_metrics, run_fly, transversal_norm, write_config
+from .flights import RATE_HZ, lap_metrics, run_fly, transversal_norm, write_config
 
 pytestmark = pytest.mark.integration
 
@@ -32,10 +32,10 @@ LAP_S = 15.578 / 1.5  # paper path length / |eta2_ref|
 )
 def test_converges_and_tracks_one_lap(tmp_path, profile: str, output: str) -> None:
     ardupilot_accel = profile == "ardupilot" and output == "acceleration"
-    # ArduPilot jerk-limits acceleration targets (PSC_JERK_XY/Z, default 5 m/s^3): with the default
-    # the loop oscillates at any useful gain, so this vehicle is configured with 50 m/s^3 and flown
-    # at 1.5 Hz transversal bandwidth.
-    config = write_config(tmp_path, gains=gains(1.5, 2.0) if ardupilot_accel else None)
+    # ArduPilot jerk-limits acceleration targets (PSC_JERK_XY/Z, default 5 m/s^3): at the default
+    # the loop never settles at the paper's gains (20 m/s^3 converges in 4.6 s), so this vehicle
+    # is configured with 50 m/s^3 (the app warns below 20).
+    config = write_config(tmp_path)
     flags = ["--airborne", "--output", output, "--duration", "18"]
     cfg = mock_config(profile, "hover:" + ",".join(map(str, HOVER_NED)))
     if profile == "px4":
@@ -53,7 +53,7 @@ def test_converges_and_tracks_one_lap(tmp_path, profile: str, output: str) -> No
     m = lap_metrics(outcome, LAP_S)
     print(f"\n{profile}/{output}: start {m.initial_cross_track_m:.3f} m off, converged in {m.convergence_s:.2f} s; "
           f"one lap: cross-track RMS {m.cross_track_rms_m * 1000:.2f} mm, max {m.cross_track_max_m * 1000:.2f} mm, "
-          f"speed error RMS {m.speed_rms_m_s * 100:.2f} cm/s")  # fmt: skip
+          f"speed error RMS {m.speed_rms_m_s * 100:.2f} cm/s; settled (from 2 s on) RMS {m.settled_cross_track_rms_m * 1000:.3f} mm")  # fmt: skip
     assert m.initial_cross_track_m == pytest.approx(1.5, abs=0.05)
     assert m.cross_track_rms_m <= 0.01
     assert m.speed_rms_m_s <= 0.02
