@@ -36,6 +36,7 @@ EXIT_OK = 0
 EXIT_INPUT = 2
 EXIT_LINK = 3  # no heartbeat, refused command, lost telemetry
 EXIT_TAKEOVER = 4  # the operator took the vehicle back; we yielded
+EXIT_INTERRUPTED = 130  # Ctrl-C before following began
 
 
 KEEPALIVE_S = 0.1  # re-send the last setpoint when nothing went out for this long
@@ -509,7 +510,11 @@ class Bridge:
             if self.phase is Phase.HANDING_BACK:
                 await self._hand_back()
         except LinkError as exc:
-            if self.phase is not Phase.TAKEN_OVER:
+            if self._stop.is_set() and self.result is None:
+                # Ctrl-C before following had begun: ask for the hold mode once, stop sending
+                await self._safe_exit()
+                self._finish(EXIT_INTERRUPTED, f"{self._end_reason or 'interrupted'} before following began; hold mode requested")
+            elif self.phase is not Phase.TAKEN_OVER:
                 self._print(f"error: {exc}")
                 await self._safe_exit()
                 self._finish(EXIT_LINK, str(exc))
