@@ -47,7 +47,7 @@ class FlightConfig:
     takeoff_altitude_m: float = 2.0
     throw_activation_height_m: float | None = None  # None: no throw activation
     end_action: str = "hold"  # at the end of an open path: hold | land
-    attitude_time_constant_s: float = 0.1  # rates mode: attitude error feedback time constant
+    attitude_time_constant_s: float = 0.05  # rates mode: attitude error feedback time constant
 
 
 @dataclass(frozen=True)

@@ -134,9 +134,8 @@ class Autopilot:
         self.position_target_echo: tuple[int, list[float]] | None = None
         self._dyn_setpoint: Setpoint = MotorsOff()
         if spawn.kind == "hover":
+            # Already flying, as a pilot would hand it over: PX4 AUTO.LOITER, ArduCopter LOITER.
             self._set_mode(self.profile.mode(self.profile.hold_mode), user=True)
-            if self.profile.name == "ardupilot":
-                self._set_mode(self.profile.mode("GUIDED"), user=True)
         elif spawn.kind == "throw" and self.profile.name == "ardupilot":
             self.mode = self.user_mode = self.profile.mode("GUIDED")
         # Scheduled injections (simulated time).
@@ -158,6 +157,10 @@ class Autopilot:
 
     @property
     def ekf_ready(self) -> bool:
+        # A vehicle spawned in the air (hovering, or armed for a throw) has a converged estimator;
+        # only a ground spawn waits for it, as ArduCopter SITL does after boot.
+        if self.config.spawn.kind != "ground":
+            return True
         return self.time_s >= self.config.ekf_ready_delay_s
 
     @property

@@ -199,7 +199,7 @@ def config_to_args(config: MockConfig) -> list[str]:
         args += ["--speed", repr(c.speed)]
     s = c.spawn
     if s.kind == "ground":
-        args += ["--spawn", "ground"]
+        args += ["--spawn", "ground:" + ",".join(repr(v) for v in s.position_ned_m[:2])]
     elif s.kind == "hover":
         args += ["--spawn", "hover:" + ",".join(repr(v) for v in s.position_ned_m)]
     else:

@@ -77,7 +77,7 @@ def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
         state_timeout_s=float(get("state_timeout_s", 0.5)),
         hover_thrust=get("hover_thrust", None),
         end_action=args.end_action or get("end_action", "hold"),
-        attitude_time_constant_s=float(get("attitude_time_constant_s", 0.1)),
+        attitude_time_constant_s=float(get("attitude_time_constant_s", 0.05)),
     )
     if s.output_mode not in ("acceleration", "attitude", "rates"):
         raise InputError("flight.output_mode", f"must be acceleration, attitude or rates, got {s.output_mode!r}")

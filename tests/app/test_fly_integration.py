@@ -45,7 +45,7 @@ def test_converges_and_tracks_one_lap(tmp_path, profile: str, output: str) -> No
         with run_in_thread(cfg) as mock:
             if ardupilot_accel:
                 mock.call(lambda m: m.autopilot.params.update(PSC_JERK_XY=50.0, PSC_JERK_Z=50.0))
-            mock.inject_takeover("LOITER")  # a pilot flying it in LOITER; the app switches to GUIDED
+            assert mock.call(lambda m: m.autopilot.mode.name) == "LOITER"  # the app switches to GUIDED
             outcome = run_fly(mock.ports.udp, config, tmp_path / "log", *flags, "--set-guid-options")
             bits = int(mock.call(lambda m: m.autopilot.params["GUID_OPTIONS"]))
         assert bits & GUID_BITS[output] == GUID_BITS[output]  # the app set what the mode needs
@@ -249,5 +249,7 @@ def test_real_time_clock_keeps_up_at_250_hz(tmp_path) -> None:
     active = [r for r in outcome.records if r.active]
     rate = len(active) / (active[-1].time_s - active[0].time_s)
     print(f"\nreal time: {rate:.0f} steps/s, converged after {outcome.summary.convergence_time_s} s")
-    assert rate >= 0.9 * RATE_HZ  # a setpoint for (nearly) every state sample
+    # Functional, not a speed target (that lives in `pf-offboard bench --only latency`): a loaded CI
+    # machine may drop samples, but the loop must keep serving most of them to fly at all.
+    assert rate >= 0.5 * RATE_HZ
     assert outcome.summary.convergence_time_s is not None and outcome.summary.convergence_time_s < 3.0

@@ -31,6 +31,14 @@ def cmd(ap: Autopilot, command: int, *params: float) -> int:
     return acks[0].result
 
 
+def guided_hover() -> Autopilot:
+    """ArduCopter hovering at 10 m, handed over from LOITER into GUIDED (custom mode 4)."""
+    ap = make("ardupilot", spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
+    assert ap.mode.name == "LOITER"
+    assert cmd(ap, mavlink.MAV_CMD_DO_SET_MODE, 1, 4) == mavlink.MAV_RESULT_ACCEPTED
+    return ap
+
+
 def run(ap: Autopilot, seconds: float, msg=None, every: int = 5) -> None:
     """Step ``seconds`` of simulated time, sending ``msg`` every ``every`` steps (50 Hz)."""
     for i in range(int(round(seconds / DT))):
@@ -319,8 +327,8 @@ def test_ardupilot_accel_zero_keeps_velocity_px4_drifts_with_drag() -> None:
     for profile in ("px4", "ardupilot"):
         ap = make(profile, spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
         run(ap, 0.3, accel_setpoint(0, 0, 0))
-        if profile == "px4":
-            assert cmd(ap, mavlink.MAV_CMD_DO_SET_MODE, 1, 6) == mavlink.MAV_RESULT_ACCEPTED
+        # Hover spawns hold (AUTO.LOITER / LOITER); switch to OFFBOARD (6) / GUIDED (4) as a client must.
+        assert cmd(ap, mavlink.MAV_CMD_DO_SET_MODE, 1, 6 if profile == "px4" else 4) == mavlink.MAV_RESULT_ACCEPTED
         run(ap, 1.5, accel_setpoint(2.0, 0, 0, yaw=0.0))
         run(ap, 1.0, accel_setpoint(0, 0, 0, yaw=0.0))  # ArduPilot: jerk-limited ramp down, settle
         v_start = ap.truth.velocity_ned_m_s[0]
@@ -333,7 +341,7 @@ def test_ardupilot_accel_zero_keeps_velocity_px4_drifts_with_drag() -> None:
 
 
 def test_ardupilot_guid_options_16_32_stop_xy_correction() -> None:
-    ap = make("ardupilot", spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
+    ap = guided_hover()
     ap.params["GUID_OPTIONS"] = 32
     run(ap, 0.3, accel_setpoint(0, 0, 0, yaw=0.0))
     run(ap, 1.5, accel_setpoint(2.0, 0, 0, yaw=0.0))
@@ -343,7 +351,7 @@ def test_ardupilot_guid_options_16_32_stop_xy_correction() -> None:
 
 
 def test_ardupilot_guided_timeout_brakes_to_hover() -> None:
-    ap = make("ardupilot", spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
+    ap = guided_hover()
     run(ap, 1.5, accel_setpoint(2.0, 0, 0, yaw=0.0))
     assert ap.truth.velocity_ned_m_s[0] > 1.5
     run(ap, ap.params["GUID_TIMEOUT"] - 0.2)
@@ -353,7 +361,7 @@ def test_ardupilot_guided_timeout_brakes_to_hover() -> None:
 
 
 def test_ardupilot_attitude_thrust_is_climb_rate_unless_option_8() -> None:
-    ap = make("ardupilot", spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
+    ap = guided_hover()
     run(ap, 2.0, _attitude(0x07, thrust=0.5))
     assert abs(ap.truth.velocity_ned_m_s[2]) < 0.1  # 0.5 holds altitude
     run(ap, 2.0, _attitude(0x07, thrust=0.9))
@@ -365,7 +373,7 @@ def test_ardupilot_attitude_thrust_is_climb_rate_unless_option_8() -> None:
 
 
 def test_ardupilot_malformed_attitude_brakes_and_masked_thrust_is_ignored() -> None:
-    ap = make("ardupilot", spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
+    ap = guided_hover()
     run(ap, 0.5, _attitude(0x07, thrust=0.7))
     assert ap.guided.submode == "angle"
     ap.handle(_attitude(0x40, thrust=0.7), 0)
@@ -377,7 +385,7 @@ def test_ardupilot_malformed_attitude_brakes_and_masked_thrust_is_ignored() -> N
 
 
 def test_ardupilot_rejects_position_plus_accel_without_velocity() -> None:
-    ap = make("ardupilot", spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
+    ap = guided_hover()
     mask = 0x0C38  # position + acceleration, velocity ignored, yaw ignored
     msg = mavlink.MAVLink_set_position_target_local_ned_message(0, 1, 1, 1, mask, 5, 0, -10, 0, 0, 0, 1, 0, 0, 0, 0)
     ap.handle(msg, 0)
