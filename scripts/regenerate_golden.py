@@ -33,10 +33,9 @@ from pf_offboard.sim.flight import SimSpec, simulate  # noqa: E402
 DATA = ROOT / "tests" / "data"
 FIGURES = ROOT / "docs" / "figures"
 PAPER = ROOT / "configs" / "paper.yaml"
-# The figures fly the paper's path and speed with gentler gains (2 Hz / 1.5 Hz): with the paper's
-# 6 Hz / 4 Hz the core limit-cycles against the mock's vehicle (see docs/logs.md). Switch this to
-# PAPER once that is resolved.
-FIGURE_CONFIG = FIGURES / "paper_sim.yaml"
+# The figures fly the paper's experiment as shipped: path, gains (6 Hz / 0.7, 4 Hz / 0.8), limits.
+# Starts at rest use eta2_ref = -1.5 m/s (Figs. 4-6), thrown starts +1.5 m/s (Figs. 7-9).
+FIGURE_CONFIG = PAPER
 EPOCH_UNIX_S = 1_780_000_000.0  # fixed so the .tlog bytes do not depend on when this runs
 
 
@@ -85,9 +84,11 @@ FIGURE_THROWS = {
     "PF1": (0.5, -2.0, 1.0, 0.0, 1.0, 5.5),
     "PF2": (-1.5, 1.0, 1.2, 1.5, 0.0, 5.0),
     "PF3": (1.5, 1.0, 1.0, -1.0, -1.5, 6.0),
-    "PF4": (0.0, 0.0, 1.5, 2.5, 0.5, 7.0),
-    "PF5": (-2.0, -1.0, 1.0, 2.0, 2.0, 8.0),
+    "PF4": (0.0, 0.0, 1.5, 2.5, 0.5, 8.0),
+    "PF5": (-2.0, -1.0, 1.0, 2.0, 2.0, 9.5),
 }
+# Activation heights as in the paper's Fig. 7: 2 m for PF1-PF3, 4 m for PF4 and PF5.
+FIGURE_THROW_HEIGHTS_M = {"PF1": 2.0, "PF2": 2.0, "PF3": 2.0, "PF4": 4.0, "PF5": 4.0}
 FIGURE_DURATION_S = 12.0
 
 
@@ -116,26 +117,34 @@ def regenerate_goldens(out_dir: Path = DATA) -> list[Path]:
 def regenerate_figures(out_dir: Path = FIGURES, config: Path = FIGURE_CONFIG) -> list[Path]:
     from pf_offboard.logs.plot import make_figures
 
+    import yaml
+
     out_dir.mkdir(parents=True, exist_ok=True)
     pngs: list[Path] = []
     with tempfile.TemporaryDirectory() as tmp:
+        # The paper's thrown runs travel the other way round (eta2_ref = +1.5 m/s, Fig. 7).
+        data = yaml.safe_load(config.read_text())
+        data["speed_m_s"] = abs(float(data["speed_m_s"]))
+        throw_config = Path(tmp) / "throw.yaml"
+        throw_config.write_text(yaml.safe_dump(data, sort_keys=False))
         for group, starts in (("hover", FIGURE_HOVER_STARTS), ("throw", FIGURE_THROWS)):
+            group_config = config if group == "hover" else throw_config
             logs = []
             for name, start in starts.items():
                 spec = SimSpec(
                     start_enu_m=start if group == "hover" else None,  # type: ignore[arg-type]
                     throw_enu=start if group == "throw" else None,
-                    throw_height_m=2.0,
+                    throw_height_m=FIGURE_THROW_HEIGHTS_M[name] if group == "throw" else 2.0,
                     duration_s=FIGURE_DURATION_S,
                     epoch_unix_s=EPOCH_UNIX_S,
                     name=name,
                 )
-                result = simulate(config, spec, Path(tmp) / group)
+                result = simulate(group_config, spec, Path(tmp) / group)
                 print(f"figures/{group}/{name}: {result.reason}; " + "; ".join(result.summary.lines()[1:3]))
                 logs.append(result.paths.steps_csv)
             figs = Path(tmp) / f"fig-{group}"
-            title = "Start at rest (cf. Fig. 4)" if group == "hover" else "Thrown starts, activation at 2 m (cf. Fig. 7)"
-            make_figures(logs, figs, config, title=title)
+            title = "Start at rest (cf. Fig. 4)" if group == "hover" else "Thrown starts, activation at 2 m / 4 m (cf. Fig. 7)"
+            make_figures(logs, figs, group_config, title=title)
             detail = "PF1" if group == "hover" else "PF5"  # the paper details PF1 (Figs. 5, 6) and thrown PF5 (8, 9)
             for src, dst in (
                 ("path3d.png", f"{group}_path3d.png"),

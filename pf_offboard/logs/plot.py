@@ -148,6 +148,26 @@ def plot_path3d(runs: Sequence[Run], reference: NDArray[np.float64] | None, out:
     return out
 
 
+def _focus_on_active(ax: object, run: Run, y: NDArray[np.float64], ref: NDArray[np.float64] | None = None) -> None:
+    """Scale the y axis to the data from activation on.
+
+    Before activation (a ballistic throw) the vehicle may pass far outside the tube |kappa xi1| < 1,
+    where the exact transverse coordinates grow without bound (eta2 = <t, v> / (1 - kappa xi1));
+    those values are logged as they are, but they must not flatten the part a reader looks at.
+    """
+    if not run.activation_s:
+        return
+    keep = run.t_s >= run.activation_s[0]
+    shown = y[keep] if ref is None else np.concatenate([y[keep], ref[keep]])
+    shown = shown[np.isfinite(shown)]
+    if shown.size == 0 or np.all(np.isfinite(y[~keep]) & (y[~keep] >= shown.min()) & (y[~keep] <= shown.max())):
+        return
+    lo, hi = float(shown.min()), float(shown.max())
+    pad = 0.08 * (hi - lo) if hi > lo else 0.1
+    ax.set_ylim(lo - pad, hi + pad)  # type: ignore[attr-defined]
+    ax.text(0.01, 0.02, "before activation: clipped", transform=ax.transAxes, fontsize=7, color="0.4")  # type: ignore[attr-defined]
+
+
 def plot_tangential(run: Run, out: Path) -> Path:
     import matplotlib.pyplot as plt
 
@@ -159,6 +179,7 @@ def plot_tangential(run: Run, out: Path) -> Path:
     a2.plot(run.t_s, ref, "--", color="C3", lw=1.2, label=r"$\eta_2^{ref}$ = " + f"{ref[run.first_active]:.2f} m/s")
     a2.set_ylabel(r"$\eta_2$ [m/s]")
     a2.set_xlabel("time [s]")
+    _focus_on_active(a2, run, run.col("eta2_m_s"), ref)
     for ax in (a1, a2):
         _mark_activation(ax, run, label=True)
         ax.grid(alpha=0.3)
@@ -183,6 +204,7 @@ def plot_transversal(run: Run, out: Path) -> Path:
     for ax, (name, label) in zip(axes.flat, panels):
         ax.plot(run.t_s, run.col(name), lw=1.2, label=label.split(" ")[0])
         ax.axhline(0.0, color="k", lw=0.6)
+        _focus_on_active(ax, run, run.col(name))
         _mark_activation(ax, run, label=True)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
