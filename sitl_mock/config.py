@@ -153,8 +153,10 @@ class MockConfig:
             raise MockConfigError("transports", "enable UDP and/or TCP")
         if self.host not in ("127.0.0.1", "localhost", "::1"):
             raise MockConfigError("host", "the mock binds loopback only (127.0.0.1)")
-        if self.duration_s is not None and not (self.duration_s > 0):
-            raise MockConfigError("duration_s", "must be > 0")
+        if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise MockConfigError("duration_s", f"must be finite and > 0 s, got {self.duration_s}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise MockConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
         if self.spawn.kind not in ("ground", "hover", "throw"):
             raise MockConfigError("spawn", f"unknown kind {self.spawn.kind!r}")
         self.faults.validate()

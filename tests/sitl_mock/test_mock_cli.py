@@ -55,6 +55,14 @@ def test_config_round_trips_through_flags() -> None:
         (["--udp-remote", "10.0.0.1:14540"], "loopback"),
         (["--takeover", "1,GUIDED"], "unknown for px4"),
         (["--blackout", "5"], "--blackout"),
+        (["--seed", "-1"], "seed"),
+        (["--duration", "nan"], "duration"),
+        (["--duration", "inf"], "duration"),
+        (["--speed", "nan"], "speed"),
+        (["--spawn", "hover:nan,0,-2"], "finite"),
+        (["--loss", "nan"], "--loss"),
+        (["--gust", "2,nan,0,0,0.5"], "--gust"),
+        (["--udp-remote", "127.0.0.1:99999"], "port out of range"),
     ],
 )
 def test_bad_flags_exit_2_with_one_clear_line(argv: list[str], message: str, capsys) -> None:
