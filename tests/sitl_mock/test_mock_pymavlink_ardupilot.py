@@ -22,12 +22,14 @@ def _ack(conn, command: int, *params: float) -> int:
     return ack.result
 
 
-def _retry(conn, command: int, *params: float, attempts: int = 50) -> int:
+def _retry(mock, conn, command: int, *params: float, attempts: int = 50) -> int:
+    """Repeat a command refused while the mock is not ready, letting 0.1 s of simulated time pass
+    between attempts (not wall-clock time)."""
     for _ in range(attempts):
         result = _ack(conn, command, *params)
         if result == mavlink.MAV_RESULT_ACCEPTED:
             return result
-        time.sleep(0.02)
+        _sim_wait(mock, 0.1, conn)
     return result
 
 
@@ -53,7 +55,7 @@ def test_mavutil_guided_takeoff_and_setpoints() -> None:
             value = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=5)
             assert value.param_id == "GUID_OPTIONS" and value.param_value == 8
 
-            assert _retry(conn, mavlink.MAV_CMD_DO_SET_MODE, 1, 4) == 0  # GUIDED once the EKF is ready
+            assert _retry(mock, conn, mavlink.MAV_CMD_DO_SET_MODE, 1, 4) == 0  # GUIDED once the EKF is ready
             conn.wait_heartbeat(timeout=5)
             assert mock.mock.autopilot.mode.name == "GUIDED"
             assert _ack(conn, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == 0
