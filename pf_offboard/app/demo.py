@@ -57,6 +57,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--laps", f"must be > 0, got {args.laps}")
     stamped = default_log_dir()
     log_dir = Path(args.log_dir) if args.log_dir else stamped.with_name("demo-" + stamped.name)
+    if args.log_dir:
+        from pf_offboard.logs._io import make_dir
+
+        make_dir(log_dir, "--log-dir")  # before the mock is started
     config = load_config(config_path)
     rate_hz = config.flight.setpoint_rate_hz
     # PX4: lockstep (one physics step per setpoint: as fast as the host allows, deterministic).

@@ -22,7 +22,10 @@ from typing import Any, TextIO
 from pf_offboard.errors import InputError, LinkError
 
 LAUNCHES = ("takeoff", "airborne", "throw")
-FROM_CONFIG = -1.0  # `--takeoff` / `--throw` without a height: take it from the config's flight: section
+# `--takeoff` / `--throw` without a height: take it from the config's flight: section. An object,
+# not a number a user could type (`--throw -1` must be refused, not read as "from the config"),
+# and not a string (argparse would pass a string const through type=float).
+FROM_CONFIG: Any = object()
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -41,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--laps", type=float, help="end after N laps")
     parser.add_argument("--duration", type=float, metavar="S", help="end after S seconds of following (vehicle time)")
     parser.add_argument("--end-action", choices=("hold", "land"), help="hand-back mode (default: flight.end_action)")
-    parser.add_argument("--target-system", type=int, help="vehicle system id (default: first autopilot heard)")
+    parser.add_argument("--target-system", type=int, metavar="ID", help="vehicle system id 1..255 (default: first autopilot heard)")
     parser.add_argument("--heartbeat-timeout", type=float, default=10.0, metavar="S", help="give up without a HEARTBEAT (s)")
     parser.add_argument("--state-source", choices=("local_position", "odometry"), default="local_position",
                         help="position/velocity telemetry to follow with")  # fmt: skip
@@ -97,11 +100,11 @@ def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
 def _heights_from_config(args: argparse.Namespace, config: Any) -> None:
     """Fill ``--takeoff`` / ``--throw`` given without a height from ``flight:``."""
     flight = getattr(config, "flight", None)
-    if args.takeoff == FROM_CONFIG:
+    if args.takeoff is FROM_CONFIG:
         args.takeoff = getattr(flight, "takeoff_altitude_m", None)
         if args.takeoff is None:
             raise InputError("--takeoff", "no height given and the config has no flight.takeoff_altitude_m")
-    if args.throw == FROM_CONFIG:
+    if args.throw is FROM_CONFIG:
         args.throw = getattr(flight, "throw_activation_height_m", None)
         if args.throw is None:
             raise InputError("--throw", "no height given and the config has no flight.throw_activation_height_m")
@@ -117,6 +120,8 @@ def _check_args(args: argparse.Namespace) -> None:
         raise InputError("--duration", f"must be > 0 s, got {args.duration}")
     if not (math.isfinite(args.heartbeat_timeout) and args.heartbeat_timeout > 0):
         raise InputError("--heartbeat-timeout", f"must be > 0 s, got {args.heartbeat_timeout}")
+    if args.target_system is not None and not 1 <= args.target_system <= 255:
+        raise InputError("--target-system", f"must be a MAVLink system id in 1..255, got {args.target_system}")
 
 
 def default_log_dir() -> Path:
@@ -151,6 +156,10 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None) -> FlyOut
     _heights_from_config(args, config)
     _check_args(args)
     settings = flight_settings(config, args)
+    if args.log_dir:
+        from pf_offboard.logs._io import make_dir
+
+        make_dir(args.log_dir, "--log-dir")  # an unwritable log directory is bad input: found before connecting
     stream = status_stream if status_stream is not None else sys.stderr
     try:
         return asyncio.run(_fly(args, endpoint, config, settings, stream))
@@ -181,7 +190,10 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
         profile = select_profile(args.autopilot, target.autopilot)
         link.set_source_system(target.system)
         log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
-        log = FlightLog.open(log_dir, config_path=args.config)
+        try:
+            log = FlightLog.open(log_dir, config_path=args.config)
+        except OSError as exc:
+            raise InputError("--log-dir", f"cannot write the logs in {log_dir}: {exc.strerror or exc}") from None
         flight_log = log
         link.on_received = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
         link.on_sent = lambda m: flight_log.frame(m.get_msgbuf(), time.time())

@@ -1,9 +1,22 @@
-"""What every log writer shares: a context manager that closes, a stream that flushes."""
+"""What every log writer shares: a context manager that closes, a stream that flushes, an output directory."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, Self
+
+from pf_offboard.errors import InputError
+
+
+def make_dir(path: str | Path, flag: str) -> Path:
+    """Create the output directory ``path`` (given by ``flag``) or raise one clear :class:`InputError`."""
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(flag, f"cannot create directory {p}: {exc.strerror or exc}") from None
+    return p
 
 
 class Closing:

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard.errors import InputError
+from pf_offboard.logs._io import make_dir
 from pf_offboard.logs.flightlog import FlightLogPaths, log_stem
 from pf_offboard.logs.steplog import StepRecord, column, read_steplog
 
@@ -257,6 +258,7 @@ def run(args: argparse.Namespace) -> int:
     for p in args.logs:
         if not Path(p).exists():
             raise InputError("LOG", f"no such file: {p}")
+    make_dir(args.out, "--out")
     for png in make_figures(args.logs, args.out, args.config, args.title):
         print(png)
     return 0

@@ -29,6 +29,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from pf_offboard.errors import InputError
+    from pf_offboard.logs._io import make_dir
     from pf_offboard.sim.flight import SimSpec, parse_start, parse_throw, simulate
 
     if not Path(args.config).is_file():
@@ -47,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
         epoch_unix_s=args.epoch,
         name=args.name,
     )
+    make_dir(args.out, "--out")
     result = simulate(args.config, spec, args.out)
     print(f"pf-offboard sim: {result.reason} after {result.sim_time_s:.2f} s simulated"
           + (" (CRASHED)" if result.crashed else ""))  # fmt: skip

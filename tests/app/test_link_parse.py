@@ -75,10 +75,28 @@ def test_fly_flags_and_flight_section(tmp_path) -> None:
         _heights_from_config(args, config)  # paper.yaml has no throw activation height
     assert info.value.field == "--throw"
     for flags, field in ((["--takeoff", "0.1"], "--takeoff"), (["--airborne", "--laps", "0"], "--laps"),
-                         (["--airborne", "--duration", "nan"], "--duration")):  # fmt: skip
+                         (["--airborne", "--duration", "nan"], "--duration"), (["--throw", "-1"], "--throw"),
+                         (["--airborne", "--target-system", "0"], "--target-system"),
+                         (["--airborne", "--target-system", "256"], "--target-system")):  # fmt: skip
         args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", str(path), *flags])
         with pytest.raises(InputError) as info:
+            _heights_from_config(args, config)  # a typed height (even -1) is never "take it from the config"
             _check_args(args)
         assert info.value.field == field
     args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", str(path), "--airborne", "--output", "attitude"])
     assert flight_settings(config, args).output_mode == "attitude"  # the flag wins
+
+
+@pytest.mark.parametrize("command", ["fly", "demo"])
+def test_unwritable_log_dir_is_exit_2_before_connecting(tmp_path, command, capsys) -> None:
+    """--log-dir that cannot be created: one line naming the flag, exit 2, nothing opened or spawned."""
+    from pf_offboard.cli import main
+
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    flags = ["--log-dir", str(blocker / "logs")]
+    if command == "fly":  # nobody listens on this port: a link attempt would time out with exit 3
+        flags += ["--connect", "udpin:127.0.0.1:9", "--config", "configs/paper.yaml", "--airborne", "--heartbeat-timeout", "0.01"]
+    assert main([command, *flags]) == 2
+    err = capsys.readouterr().err
+    assert "--log-dir: cannot create directory" in err and "Traceback" not in err

@@ -64,6 +64,10 @@ def test_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "x.tlog").write_bytes(b"\0" * 20)
     assert main(["plot", str(tmp_path / "x.tlog"), "--out", str(tmp_path)]) == 2
     assert "no step log x.csv" in capsys.readouterr().err
+    circle_flight(tmp_path / "a.csv", (0.0, -1.5), thrown=False)
+    assert main(["plot", str(tmp_path / "a.csv"), "--out", str(tmp_path / "x.tlog" / "figs")]) == 2
+    err = capsys.readouterr().err
+    assert "--out: cannot create directory" in err and "Traceback" not in err
 
 
 def test_runs_named_after_their_directory(tmp_path: Path) -> None:

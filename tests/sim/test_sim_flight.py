@@ -153,6 +153,13 @@ def test_cli_bad_input(tmp_path: Path, flags: list[str], message: str, capsys: p
     assert not (tmp_path / "flight.tlog").exists()  # nothing flown
 
 
+def test_cli_unwritable_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "file").write_text("")
+    assert main(["sim", "--config", str(PAPER), "--out", str(tmp_path / "file" / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "--out: cannot create directory" in err and "Traceback" not in err
+
+
 def test_cli_bad_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["sim", "--config", str(tmp_path / "none.yaml"), "--out", str(tmp_path)]) == 2
     assert "--config: no such file" in capsys.readouterr().err
