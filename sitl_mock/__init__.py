@@ -11,9 +11,11 @@ lazily so ``import sitl_mock.dynamics`` stays light. See docs/sitl-mock.md.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Any
 
-_EXPORTS = {
+_EXPORTS: Mapping[str, str] = MappingProxyType({
     "MockConfig": "sitl_mock.config",
     "FaultConfig": "sitl_mock.config",
     "SpawnSpec": "sitl_mock.config",
@@ -23,7 +25,7 @@ _EXPORTS = {
     "Ports": "sitl_mock.server",
     "run_in_thread": "sitl_mock.runner",
     "spawn": "sitl_mock.runner",
-}
+})
 
 __all__ = sorted(_EXPORTS)
 

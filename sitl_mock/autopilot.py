@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
@@ -66,13 +68,13 @@ FAILED = mavlink.MAV_RESULT_FAILED
 
 
 # ArduPilot's REQUEST_DATA_STREAM groups → the messages of each group the mock can send.
-_DATA_STREAMS: dict[int, tuple[int, ...]] = {
+_DATA_STREAMS: Mapping[int, tuple[int, ...]] = MappingProxyType({
     mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: (mavlink.MAVLINK_MSG_ID_SYS_STATUS, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE),
     mavlink.MAV_DATA_STREAM_RAW_SENSORS: (mavlink.MAVLINK_MSG_ID_HIGHRES_IMU,),
     mavlink.MAV_DATA_STREAM_POSITION: (mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
     mavlink.MAV_DATA_STREAM_EXTRA1: (mavlink.MAVLINK_MSG_ID_ATTITUDE,),
     mavlink.MAV_DATA_STREAM_EXTRA2: (mavlink.MAVLINK_MSG_ID_VFR_HUD,),
-}
+})
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,9 @@ Pure data (frozen dataclasses and tuples); the behaviour that uses it lives in
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -98,7 +100,7 @@ class ParamSpec:
     kind: ParamType = ParamType.REAL32
 
 
-HOVER_PARAM = {"px4": "MPC_THR_HOVER", "ardupilot": "MOT_THST_HOVER"}
+HOVER_PARAM: Mapping[str, str] = MappingProxyType({"px4": "MPC_THR_HOVER", "ardupilot": "MOT_THST_HOVER"})
 
 PX4_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_DISARM_LAND", 2.0),  # s, auto-disarm after landing
@@ -206,7 +208,7 @@ _CAP = (
     | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
 )
 
-PROFILES: dict[str, Profile] = {
+PROFILES: Mapping[str, Profile] = MappingProxyType({
     "px4": Profile(
         name="px4",
         autopilot=mavlink.MAV_AUTOPILOT_PX4,
@@ -241,4 +243,4 @@ PROFILES: dict[str, Profile] = {
         | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
         | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
     ),
-}
+})

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -226,7 +228,7 @@ def autopilot_version(ap: Autopilot) -> mavlink.MAVLink_message:
     )
 
 
-BUILDERS = {
+BUILDERS: Mapping[int, Callable[..., object]] = MappingProxyType({
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: heartbeat,
     mavlink.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
@@ -242,7 +244,7 @@ BUILDERS = {
     mavlink.MAVLINK_MSG_ID_ATTITUDE_TARGET: attitude_target,
     mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: position_target_local_ned,
     mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
-}
+})
 # Messages that need a position estimate (ArduPilot sends them only once the EKF has one).
 NEEDS_POSITION = frozenset(
     {
