@@ -258,6 +258,8 @@ def run(args: argparse.Namespace) -> int:
     for p in args.logs:
         if not Path(p).exists():
             raise InputError("LOG", f"no such file: {p}")
+        if Path(p).is_dir():
+            raise InputError("LOG", f"{p} is a directory; give its .csv or .tlog (e.g. {Path(p) / 'flight.csv'})")
     make_dir(args.out, "--out")
     for png in make_figures(args.logs, args.out, args.config, args.title):
         print(png)

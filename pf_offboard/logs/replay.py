@@ -351,6 +351,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--tolerance", f"must be a finite number >= 0, got {args.tolerance}")
     if args.hover_thrust is not None and not (math.isfinite(args.hover_thrust) and 0.05 <= args.hover_thrust <= 0.95):
         raise InputError("--hover-thrust", f"must be in [0.05, 0.95] (normalised), got {args.hover_thrust}")
+    if Path(args.log).is_dir():
+        raise InputError("LOG", f"{args.log} is a directory; give its .tlog (e.g. {Path(args.log) / 'flight.tlog'})")
     config_path = Path(args.config) if args.config else FlightLogPaths.beside(args.log).config_yaml
     if not config_path.exists():
         raise InputError("--config", f"no such file: {config_path}" + ("" if args.config else " (pass --config)"))

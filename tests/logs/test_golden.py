@@ -157,3 +157,9 @@ def test_cli_replay_missing_log(tmp_path: Path, capsys: pytest.CaptureFixture[st
     (tmp_path / "x.yaml").write_bytes(golden("paper_hover_px4")[2].read_bytes())
     assert main(["replay", str(tmp_path / "x.tlog")]) == 2
     assert "x.tlog: cannot read" in capsys.readouterr().err
+
+
+def test_cli_replay_of_a_directory_names_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["replay", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "LOG: " in err and "is a directory" in err and "Traceback" not in err

@@ -68,6 +68,8 @@ def test_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["plot", str(tmp_path / "a.csv"), "--out", str(tmp_path / "x.tlog" / "figs")]) == 2
     err = capsys.readouterr().err
     assert "--out: cannot create directory" in err and "Traceback" not in err
+    assert main(["plot", str(tmp_path), "--out", str(tmp_path / "figs")]) == 2
+    assert "is a directory" in capsys.readouterr().err
 
 
 def test_runs_named_after_their_directory(tmp_path: Path) -> None:
