@@ -32,24 +32,39 @@ def accel_setpoint(ax: float, ay: float, az: float, yaw: float | None = None) ->
 
 
 class UdpClient:
-    """A blocking pymavlink client on a connected UDP socket (sysid 255, compid 190)."""
+    """A blocking pymavlink client on a connected UDP socket (sysid 255, compid 190).
+
+    Use it as a context manager: the socket is opened on entry and closed on exit (no I/O in
+    the constructor)."""
 
     def __init__(self, port: int, timeout_s: float = 5.0) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.connect(("127.0.0.1", port))
-        self.sock.settimeout(timeout_s)
+        self.port = port
+        self.timeout_s = timeout_s
+        self.sock: socket.socket | None = None
         self.mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
         self.mav.robust_parsing = True
         self.bad = 0
 
+    def open(self) -> UdpClient:
+        """Open and connect the socket to 127.0.0.1:``port``."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.connect(("127.0.0.1", self.port))
+            sock.settimeout(self.timeout_s)
+        except BaseException:
+            sock.close()
+            raise
+        self.sock = sock
+        return self
+
     def send(self, msg: mavlink.MAVLink_message) -> None:
-        self.sock.send(msg.pack(self.mav))
+        self._open_socket().send(msg.pack(self.mav))
         self.mav.seq = (self.mav.seq + 1) & 0xFF
 
     def recv(self) -> list[mavlink.MAVLink_message]:
         """Messages of one datagram (CRC failures counted in ``bad`` and dropped)."""
         out = []
-        for msg in self.mav.parse_buffer(self.sock.recv(65536)) or []:
+        for msg in self.mav.parse_buffer(self._open_socket().recv(65536)) or []:
             if msg.get_type() == "BAD_DATA":
                 self.bad += 1
             else:
@@ -64,11 +79,18 @@ class UdpClient:
                     return msg
         raise TimeoutError(f"no {msg_type} within {timeout_s} s")
 
+    def _open_socket(self) -> socket.socket:
+        if self.sock is None:
+            raise RuntimeError("UdpClient is not open: use it as a context manager (with UdpClient(port) as c)")
+        return self.sock
+
     def close(self) -> None:
-        self.sock.close()
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
 
     def __enter__(self) -> UdpClient:
-        return self
+        return self.open()
 
     def __exit__(self, *exc: object) -> None:
         self.close()
