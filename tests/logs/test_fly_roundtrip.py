@@ -4,6 +4,9 @@
 from __future__ import annotations
 
 import argparse
+import subprocess
+import sys
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -14,6 +17,7 @@ from pf_offboard.logs.tlog import read_tlog
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "configs" / "paper.yaml"
+SETPOINT = {"acceleration": "SET_POSITION_TARGET_LOCAL_NED", "attitude": "SET_ATTITUDE_TARGET", "rates": "SET_ATTITUDE_TARGET"}
 
 
 @pytest.mark.integration
@@ -52,6 +56,18 @@ def test_fly_logs_replay_and_plot(
     assert any(r.active for r in records)
     state_msg = "ODOMETRY" if state_source == "odometry" else "LOCAL_POSITION_NED"
     assert sum(e.message.get_type() == state_msg for e in entries) >= len(records)
+    # pymavlink's own mavlogdump.py reads the real flight log: every frame, in and out, same types
+    dump = subprocess.run([sys.executable, "-m", "pymavlink.tools.mavlogdump", str(tlog)], capture_output=True, text=True, timeout=60)
+    assert dump.returncode == 0 and not dump.stderr.strip(), dump.stderr
+    dumped = Counter(line.split(": ", 1)[1].split(" ", 1)[0] for line in dump.stdout.splitlines())
+    assert dumped == Counter(e.message.get_type() for e in entries)
+    assert dumped[state_msg] >= len(records) and dumped[SETPOINT[output]] >= len(records) - 1
+    # `sim` writes the same files, with the same step-log columns
+    from pf_offboard.sim import SimSpec, simulate
+
+    sim = simulate(PAPER, SimSpec(duration_s=0.1, output_mode=output, autopilot=autopilot), tmp_path / "sim")
+    assert sorted(p.name for p in sim.paths.tlog.parent.iterdir()) == sorted(p.name for p in log_dir.iterdir())
+    assert sim.paths.steps_csv.read_text().splitlines()[0] == csv.read_text().splitlines()[0]
     capsys.readouterr()
     assert main(["replay", str(tlog), "--config", str(PAPER)]) == 0
     out = capsys.readouterr().out
