@@ -161,3 +161,67 @@ def test_round_trip_file(tmp_path):
     cfg = load_config(p)
     assert cfg.speed_m_s == -2.0 and cfg.flight.output_mode == "rates" and cfg.flight.hover_thrust is None
     assert cfg.source == str(p)
+
+
+NUMERIC_FIELDS = [
+    ("speed_m_s",),
+    ("gains", "transversal", "bandwidth_hz"),
+    ("gains", "transversal", "damping"),
+    ("gains", "tangential", "bandwidth_hz"),
+    ("gains", "tangential", "damping"),
+    ("yaw", "yaw_deg"),
+    ("limits", "max_tilt_deg"),
+    ("limits", "min_thrust_m_s2"),
+    ("limits", "max_thrust_m_s2"),
+    ("limits", "max_approach_speed_m_s"),
+    ("limits", "max_tilt_rate_rad_s"),
+    ("flight", "setpoint_rate_hz"),
+    ("flight", "state_timeout_s"),
+    ("flight", "hover_thrust"),
+    ("flight", "takeoff_altitude_m"),
+    ("flight", "throw_activation_height_m"),
+    ("flight", "attitude_time_constant_s"),
+]
+
+
+def _with(keys: tuple[str, ...], value) -> dict:
+    data = minimal()
+    d = data
+    for k in keys[:-1]:
+        d = d.setdefault(k, {})
+    d[keys[-1]] = value
+    return data
+
+
+@pytest.mark.parametrize("keys", NUMERIC_FIELDS, ids=[".".join(k) for k in NUMERIC_FIELDS])
+@pytest.mark.parametrize(
+    "value,reason",
+    [(math.nan, "finite"), (math.inf, "finite"), (-math.inf, "finite"), ("fast", "number"), (True, "number"),
+     ([1.0], "number")],
+    ids=["nan", "inf", "-inf", "string", "bool", "list"],
+)
+def test_every_numeric_field_rejects_non_numbers_and_non_finite(keys, value, reason):
+    """Every numeric field of every section: NaN/inf and non-numbers give one ConfigError naming
+    the dotted field and the reason (never a default silently used, never a crash)."""
+    with pytest.raises(ConfigError) as err:
+        parse_config(_with(keys, value))
+    assert err.value.field == ".".join(keys)
+    assert reason in err.value.reason
+
+
+def test_every_numeric_field_is_in_the_schema():
+    """The list above covers every numeric field the schema has (a new field needs a row)."""
+    from dataclasses import fields
+
+    covered = {k[-1] for k in NUMERIC_FIELDS}
+    schema = {f.name for f in fields(FlightConfig) if f.type in ("float", "float | None")}
+    schema |= {f.name for f in fields(Limits)}
+    assert len(schema) == 11
+    assert schema <= covered, schema - covered
+
+
+@pytest.mark.parametrize("section", ["gains", "yaw", "limits", "flight", "path"])
+def test_every_section_must_be_a_mapping(section):
+    with pytest.raises(ConfigError) as err:
+        parse_config(minimal(**{section: [1, 2]}))
+    assert err.value.field == section and "mapping" in err.value.reason
