@@ -60,14 +60,20 @@ def evaluate_terms(path: Path, lam: float, position: ArrayLike, velocity: ArrayL
     """T(x), alpha, beta at a given closest-point parameter ``lam`` (no projection, no state)."""
     s = path.eval_floats(lam)
     (_, _, _), (e2, de2, dde2), (e3, de3, dde3) = path.frame_jets(lam)
-    y = _vec(position, "position")
-    v = _vec(velocity, "velocity")
+    y = _vec(position, "position", MAX_POSITION_ABS_M)
+    v = _vec(velocity, "velocity", MAX_VELOCITY_ABS_M_S)
     return exact_terms(
         path.arclength(lam), s[0:3], s[3:6], s[6:9], s[9:12], e2, de2, dde2, e3, de3, dde3, y, v
     )
 
 
-def _vec(value: ArrayLike, name: str) -> Vec:
+# Beyond these magnitudes the input is not a quadrotor's state (and squares of it overflow to
+# inf, which would turn the command into NaN): rejected like NaN.
+MAX_POSITION_ABS_M = 1e6  # per component
+MAX_VELOCITY_ABS_M_S = 1e3  # per component
+
+
+def _vec(value: ArrayLike, name: str, bound: float) -> Vec:
     p = value.tolist() if isinstance(value, np.ndarray) else value
     try:
         if len(p) != 3:  # type: ignore[arg-type]
@@ -77,7 +83,17 @@ def _vec(value: ArrayLike, name: str) -> Vec:
         raise InputError(name, f"expected 3 numbers, got {value!r}") from None
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         raise InputError(name, f"not finite: {[x, y, z]}")
+    if abs(x) > bound or abs(y) > bound or abs(z) > bound:
+        raise InputError(name, f"component beyond {bound:g} (not a vehicle state): {[x, y, z]}")
     return x, y, z
+
+
+def _finite(*groups: tuple[float, ...]) -> bool:
+    for g in groups:
+        for x in g:
+            if not math.isfinite(x):
+                return False
+    return True
 
 
 class PathFollower:
@@ -98,7 +114,10 @@ class PathFollower:
         limits: Limits | None = None,
         projector: Any = None,
     ) -> None:
-        speed = float(speed)
+        try:
+            speed = float(speed)
+        except (TypeError, ValueError):
+            raise InputError("speed_m_s", f"must be a number, got {speed!r}") from None
         if not math.isfinite(speed) or speed == 0.0 or abs(speed) > MAX_SPEED_M_S:
             raise InputError("speed_m_s", f"must be non-zero with |speed| <= {MAX_SPEED_M_S} m/s, got {speed}")
         self.path = path
@@ -146,11 +165,11 @@ class PathFollower:
 
     def transverse_state(self, position: ArrayLike, velocity: ArrayLike) -> TransverseState:
         """T(x) = (eta1, eta2, xi1, xi2, phi1, phi2) (m, m/s) at this state (updates the warm start)."""
-        return self._terms(_vec(position, "position"), _vec(velocity, "velocity"))[2].state
+        return self._terms(_vec(position, "position", MAX_POSITION_ABS_M), _vec(velocity, "velocity", MAX_VELOCITY_ABS_M_S))[2].state
 
     def decoupling(self, position: ArrayLike, velocity: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(alpha (3,), beta (3, 3)) with d/dt (eta2, xi2, phi2) = alpha + beta a (updates the warm start)."""
-        t = self._terms(_vec(position, "position"), _vec(velocity, "velocity"))[2]
+        t = self._terms(_vec(position, "position", MAX_POSITION_ABS_M), _vec(velocity, "velocity", MAX_VELOCITY_ABS_M_S))[2]
         return np.array(t.alpha), np.array((t.beta1, t.beta2, t.beta3))
 
     # ------------------------------------------------------------------ control
@@ -167,8 +186,8 @@ class PathFollower:
 
         Raises :class:`InputError` for non-finite input (never a command computed from NaN).
         """
-        y = _vec(position, "position")
-        v = _vec(velocity, "velocity")
+        y = _vec(position, "position", MAX_POSITION_ABS_M)
+        v = _vec(velocity, "velocity", MAX_VELOCITY_ABS_M_S)
         lam, s, terms = self._terms(y, v)
         st = terms.state
         eta2_ref = self.reference_speed(st.eta1)
@@ -227,6 +246,8 @@ class PathFollower:
         axes = attitude_from_thrust(f, psi)
         q = quaternion_from_axes(*axes)
         omega = body_rates(axes, thrust, jerk, yaw_rate)
+        if not _finite(res.accel, q, omega, (thrust, psi, yaw_rate)):  # last line of defence
+            raise InputError("state", f"no finite command at position {list(y)}, velocity {list(v)}")
         return Command(
             acceleration=np.array(res.accel),
             thrust=thrust,

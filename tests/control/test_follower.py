@@ -235,6 +235,29 @@ def test_bad_input_raises_and_never_commands():
     for bad in (0.0, math.nan, 25.0):
         with pytest.raises(InputError):
             PathFollower(path, speed=bad)
+    with pytest.raises(InputError, match="speed_m_s"):
+        PathFollower(path, speed="fast")  # type: ignore[arg-type]
+    # finite but absurd: 1e300 m/s once squared is inf, and the command would be NaN
+    with pytest.raises(InputError, match="velocity"):
+        f.update([0.0, 0.0, 1.0], [1e300, 0.0, 0.0])
+    with pytest.raises(InputError, match="position"):
+        f.update([0.0, -1e300, 1.0], [0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("name", ["paper.yaml", "straight.yaml", "helix.yaml"])
+def test_extreme_finite_states_give_finite_commands(name):
+    """Up to the input bounds (1e6 m, 1e3 m/s per component) every command is finite."""
+    f = PathFollower.from_config(config_path(name))
+    rng = np.random.default_rng(8)
+    for pos_m in (0.0, 1e3, 1e5, 0.999e6):
+        for vel_m_s in (0.0, 30.0, 0.999e3):
+            for _ in range(10):
+                d, w = rng.normal(size=3), rng.normal(size=3)
+                f.reset()
+                c = f.update(pos_m * d / np.abs(d).max(), vel_m_s * w / np.abs(w).max())
+                assert np.all(np.isfinite(c.acceleration)) and np.all(np.isfinite(c.body_rates))
+                assert np.all(np.isfinite(c.attitude)) and math.isfinite(c.thrust) and math.isfinite(c.yaw_rate)
+                assert feasible(f.limits, c.acceleration)
 
 
 def test_value_objects_and_reset(paper_path):
