@@ -29,6 +29,10 @@ FRENET_MIN_KAPPA_1_M = 1e-2
 GRID_STEP_M = 0.05
 # Way-points closer than this are duplicates.
 DUPLICATE_TOL_M = 1e-6
+# Way-points farther from the origin are refused: the sampled path grows with its length (a 5 km
+# loop takes ~5 s to build) and the spline fit loses conditioning beyond that; a flight path in a
+# local frame is much smaller (a value this large usually means wrong units).
+MAX_WAYPOINT_ABS_M = 5000.0
 
 _FRAMES = ("auto", "frenet", "rmf")
 
@@ -67,6 +71,8 @@ class FrameDerivs(NamedTuple):
 
 
 def _validate(points: ArrayLike, closed: bool) -> NDArray[np.float64]:
+    if not isinstance(closed, (bool, np.bool_)):
+        raise InputError("closed", f"must be true or false, got {closed!r}")
     try:
         pts = np.array(points, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -76,6 +82,10 @@ def _validate(points: ArrayLike, closed: bool) -> NDArray[np.float64]:
     for i, p in enumerate(pts):
         if not np.all(np.isfinite(p)):
             raise InputError(f"waypoints[{i}]", f"not finite: {p.tolist()}")
+        if np.abs(p).max() > MAX_WAYPOINT_ABS_M:
+            raise InputError(
+                f"waypoints[{i}]", f"coordinate beyond {MAX_WAYPOINT_ABS_M:g} m of the origin (units?): {p.tolist()}"
+            )
     need = 3 if closed else 2
     kind = "closed" if closed else "open"
     if len(pts) < need:

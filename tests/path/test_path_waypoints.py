@@ -79,3 +79,25 @@ def test_waypoints_are_copied():
     assert path.waypoints[0, 0] == 0.0
     with pytest.raises(ValueError):
         path.waypoints[0, 0] = 1.0  # read-only
+
+
+@pytest.mark.parametrize("closed", [False, True])
+@pytest.mark.parametrize("big", [1e300, -6000.0])
+def test_absurd_coordinates_name_the_index(big, closed):
+    """Finite but absurd (wrong units): refused before the spline fit (which would fail with an
+    unnamed error or build a sampled path of millions of points)."""
+    pts = [list(p) for p in GOOD]
+    pts[2][1] = big
+    e = _err(pts, closed=closed)
+    assert e.field == "waypoints[2]" and "units" in e.reason
+
+
+def test_a_5_km_path_is_accepted():
+    path = Path.from_waypoints([[0.0, 0.0, 1.0], [4000.0, 0.0, 1.0], [4000.0, 5000.0, 50.0]])
+    assert path.length_m > 6000.0
+
+
+@pytest.mark.parametrize("closed", ["yes", 1, None])
+def test_closed_must_be_a_bool(closed):
+    e = _err(GOOD, closed=closed)
+    assert e.field == "closed" and "true or false" in e.reason
