@@ -128,6 +128,8 @@ def _check(spec: SimSpec) -> None:
         raise InputError("--throw-height", f"must be > 0 m, got {spec.throw_height_m}")
     if spec.epoch_unix_s is not None and not (math.isfinite(spec.epoch_unix_s) and 1e9 <= spec.epoch_unix_s <= 7e9):
         raise InputError("--epoch", f"must be a UNIX time in seconds (1e9..7e9), got {spec.epoch_unix_s}")
+    if not 0 <= spec.seed < 2**63:
+        raise InputError("--seed", f"must be an integer in [0, 2^63), got {spec.seed}")
     if not spec.name or "/" in spec.name or spec.name.startswith("."):
         raise InputError("--name", f"must be a plain file stem, got {spec.name!r}")
 

@@ -144,6 +144,7 @@ def test_cli_sim_replay_plot(tmp_path: Path, soft_paper: Path, capsys: pytest.Ca
         (["--duration", "-1"], "--duration: must be in (0, 3600] s"),
         (["--rate", "1000"], "--rate: must be in [20, 250] Hz"),
         (["--name", "../x"], "--name: must be a plain file stem"),
+        (["--seed", "-1"], "--seed: must be an integer in [0, 2^63)"),
     ],
 )
 def test_cli_bad_input(tmp_path: Path, flags: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
