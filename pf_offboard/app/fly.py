@@ -253,6 +253,13 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
                 tg.create_task(bridge.heartbeat())
                 tg.create_task(bridge.status_line())
                 result = await flight
+        except BaseExceptionGroup as group:
+            # TaskGroup wraps what a task raised: hand bad input (InputError -> exit 2, e.g. GUID_OPTIONS
+            # refused in setup) and link failures (-> exit 3) on as themselves, not as a traceback.
+            first = _first_leaf(group)
+            if isinstance(first, (InputError, LinkError)):
+                raise first from None
+            raise
         finally:
             loop.remove_signal_handler(signal.SIGINT)
     finally:
@@ -264,6 +271,13 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     summary = summarize(records) if records else None
     _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
     return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s)
+
+
+def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[type-arg]
+    first: BaseException = group
+    while isinstance(first, BaseExceptionGroup):
+        first = first.exceptions[0]
+    return first
 
 
 async def _check_guid_options(bridge: Any, required: int, allow_set: bool, output_mode: str) -> None:

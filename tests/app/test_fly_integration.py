@@ -254,3 +254,22 @@ def test_real_time_clock_keeps_up_at_250_hz(tmp_path) -> None:
     # machine may drop samples, but the loop must keep serving most of them to fly at all.
     assert rate >= 0.5 * RATE_HZ
     assert outcome.summary.convergence_time_s is not None and outcome.summary.convergence_time_s < 3.0
+
+
+def test_ardupilot_guid_options_refused_is_exit_2_and_nothing_flown(tmp_path, capsys) -> None:
+    """GUID_OPTIONS lacks the thrust bit and no --set-guid-options: one line naming the flag, exit 2
+    (raised inside the flight's TaskGroup, so this also checks it is not an ExceptionGroup traceback),
+    no setpoint, no mode or parameter change sent."""
+    from pf_offboard.cli import main
+
+    config = write_config(tmp_path)
+    with run_in_thread(mock_config("ardupilot", "hover:" + ",".join(map(str, HOVER_NED)))) as mock:
+        code = main(["fly", "--connect", f"udpout:127.0.0.1:{mock.ports.udp}", "--config", str(config), "--airborne",
+                     "--output", "rates", "--quiet", "--heartbeat-timeout", "5", "--log-dir", str(tmp_path / "log")])  # fmt: skip
+        assert mock.call(lambda m: m.autopilot.mode.name) == "LOITER"
+        assert int(mock.call(lambda m: m.autopilot.params["GUID_OPTIONS"])) & 8 == 0
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "--set-guid-options: ArduPilot GUID_OPTIONS" in err and "Traceback" not in err
+    sent = {e.message.get_type() for e in read_tlog(tmp_path / "log" / "flight.tlog") if e.direction == "out"}
+    assert not sent & {"SET_ATTITUDE_TARGET", "SET_POSITION_TARGET_LOCAL_NED", "PARAM_SET"}, sent
