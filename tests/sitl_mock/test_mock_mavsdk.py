@@ -71,6 +71,11 @@ def test_mavsdk_connects_arms_and_flies_offboard() -> None:
                 await _sim_wait(mock, 1.5)
                 assert mock.truth.velocity_ned_m_s[2] < -1.5
                 assert mock.truth.position_ned_m[2] < -1.0
+                # As commanded: the thrust acceleration (kinematic plus linear drag) is the setpoint.
+                drag = mock.autopilot.sim.params.drag_1_s
+                thrust_acc = mock.truth.accel_ned_m_s2 + drag * mock.truth.velocity_ned_m_s
+                print("MAVSDK acceleration setpoint (0, 0, -2): thrust acceleration", thrust_acc)
+                assert thrust_acc == pytest.approx([0.0, 0.0, -2.0], abs=0.05)
                 modes = telemetry.subscribe_flight_mode()
                 assert await asyncio.wait_for(_first(modes), 10) == FlightMode.OFFBOARD
 
@@ -80,6 +85,14 @@ def test_mavsdk_connects_arms_and_flies_offboard() -> None:
                 await _sim_wait(mock, 1.0)
                 assert mock.truth.rates_frd_rad_s[2] == pytest.approx(math.radians(45.0), abs=0.1)
                 assert abs(mock.truth.rates_frd_rad_s[0]) < 0.1 and abs(mock.truth.rates_frd_rad_s[1]) < 0.1
+                # Hover thrust, level: no vertical thrust acceleration beyond drag; heading turns at 45 deg/s.
+                thrust_acc = mock.truth.accel_ned_m_s2 + drag * mock.truth.velocity_ned_m_s
+                print("MAVSDK attitude rate (0, 0, 45 deg/s, hover): thrust acceleration", thrust_acc)
+                assert abs(thrust_acc[2]) < 0.1
+                yaw0, t0 = mock.truth.euler_rad[2], mock.time_s
+                await _sim_wait(mock, 0.5)
+                turned = math.remainder(mock.truth.euler_rad[2] - yaw0, 2 * math.pi)
+                assert turned / (mock.time_s - t0) == pytest.approx(math.radians(45.0), rel=0.05)
 
                 await offboard.stop()
                 assert mock.autopilot.mode.name == "AUTO.LOITER"
