@@ -73,8 +73,23 @@ def test_mavutil_guided_takeoff_and_setpoints() -> None:
             assert mock.truth.velocity_ned_m_s[0] == pytest.approx(2.0, abs=0.4)
             assert mock.truth.position_ned_m[0] > x0 + 1.5
 
-            # Attitude + raw thrust (GUID_OPTIONS=8): above hover thrust the vehicle climbs.
+            # Acceleration only (type_mask 0x0C3F): 1.5 m/s² east; ArduPilot ramps it in (jerk limit).
+            vy0 = mock.truth.velocity_ned_m_s[1]
+            for _ in range(20):
+                conn.mav.set_position_target_local_ned_send(0, 1, 1, 1, 0x0C3F, 0, 0, 0, 0, 0, 0, 0, 1.5, 0, 0, 0)
+                _sim_wait(mock, 0.1, conn)
+            dvy = mock.truth.velocity_ned_m_s[1] - vy0
+            print(f"mavutil acceleration setpoint 1.5 m/s² east for 2 s: velocity east +{dvy:.2f} m/s")
+            assert 2.5 < dvy < 3.05  # 3 m/s less the jerk-limited ramp-in
+
+            # Body rates + thrust (attitude ignored, GUID_OPTIONS=8): yaw at 0.5 rad/s.
             hover = mock.mock.autopilot.sim.params.true_hover_thrust
+            for _ in range(20):
+                conn.mav.set_attitude_target_send(0, 1, 1, 0x80, [1, 0, 0, 0], 0, 0, 0.5, hover)
+                _sim_wait(mock, 0.05, conn)
+            assert mock.truth.rates_frd_rad_s[2] == pytest.approx(0.5, abs=0.05)
+
+            # Attitude + raw thrust (GUID_OPTIONS=8): above hover thrust the vehicle climbs.
             z0 = mock.truth.position_ned_m[2]
             for _ in range(20):
                 conn.mav.set_attitude_target_send(0, 1, 1, 0x07, [1, 0, 0, 0], 0, 0, 0, hover + 0.15)
