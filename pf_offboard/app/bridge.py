@@ -675,16 +675,18 @@ class Bridge:
         tty = self.status_stream.isatty()
         period = 0.2 if tty else 1.0
         last = self.clock()
-        while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
-            await asyncio.sleep(period)
-            now = self.clock()
-            self.loop_rate_hz, self._rate_count, last = self._rate_count / max(now - last, 1e-9), 0, now
-            if self.options.status:
-                line = self.status_text()
-                self.status_stream.write(f"\r{line}\x1b[K" if tty else line + "\n")
-                self.status_stream.flush()
-        if self.options.status and tty:
-            self.status_stream.write("\n")
+        try:
+            while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
+                await asyncio.sleep(period)
+                now = self.clock()
+                self.loop_rate_hz, self._rate_count, last = self._rate_count / max(now - last, 1e-9), 0, now
+                if self.options.status:
+                    line = self.status_text()
+                    self.status_stream.write(f"\r{line}\x1b[K" if tty else line + "\n")
+                    self.status_stream.flush()
+        finally:  # also when cancelled at the end of the flight
+            if self.options.status and tty:
+                self.status_stream.write("\n")
 
     def status_text(self) -> str:
         mode = self.profile.mode_name(self.custom_mode) if self.custom_mode is not None else "?"

@@ -249,10 +249,10 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
         try:
             async with asyncio.TaskGroup() as tg:
                 flight = tg.create_task(bridge.fly(setup))
-                tg.create_task(bridge.keepalive())
-                tg.create_task(bridge.heartbeat())
-                tg.create_task(bridge.status_line())
+                helpers = [tg.create_task(bridge.keepalive()), tg.create_task(bridge.heartbeat()), tg.create_task(bridge.status_line())]
                 result = await flight
+                for task in helpers:  # they poll the phase once a period (HEARTBEAT: 1 s): end them now
+                    task.cancel()
         except BaseExceptionGroup as group:
             # TaskGroup wraps what a task raised: hand bad input (InputError -> exit 2, e.g. GUID_OPTIONS
             # refused in setup) and link failures (-> exit 3) on as themselves, not as a traceback.
