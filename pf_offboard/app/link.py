@@ -132,6 +132,8 @@ class Link:
                 autoreconnect=False,
                 robust_parsing=True,
             )
+        except ImportError as exc:  # pymavlink opens serial ports with pyserial, an optional package
+            raise LinkError(f"cannot open {endpoint}: {exc.name or 'serial'} is not installed (pip install pyserial)") from exc
         except Exception as exc:  # socket / serial errors come in many types
             raise LinkError(f"cannot open {endpoint}: {exc}") from exc
         fd = getattr(conn, "fd", None)

@@ -100,3 +100,16 @@ def test_unwritable_log_dir_is_exit_2_before_connecting(tmp_path, command, capsy
     assert main([command, *flags]) == 2
     err = capsys.readouterr().err
     assert "--log-dir: cannot create directory" in err and "Traceback" not in err
+
+
+def test_serial_endpoint_that_cannot_open_is_a_link_error() -> None:
+    """A missing device, or pymavlink's optional pyserial missing: LinkError naming the endpoint (exit 3)."""
+    import importlib.util
+
+    from pf_offboard.app.link import Link
+    from pf_offboard.errors import LinkError
+
+    with pytest.raises(LinkError, match="cannot open serial:/dev/pf-offboard-no-such-device:57600") as info:
+        Link.open(parse_endpoint("serial:/dev/pf-offboard-no-such-device:57600"))
+    if importlib.util.find_spec("serial") is None:
+        assert "pip install pyserial" in str(info.value)
