@@ -275,3 +275,15 @@ def test_ardupilot_guid_options_refused_is_exit_2_and_nothing_flown(tmp_path, ca
     out = [e.message for e in read_tlog(tmp_path / "log" / "flight.tlog") if e.direction == "out"]
     assert "PARAM_SET" not in {m.get_type() for m in out}
     assert not [m for m in out if m.get_type() == "COMMAND_LONG" and m.command == 176]  # MAV_CMD_DO_SET_MODE
+
+
+def test_end_action_land_hands_back_in_land_mode(tmp_path) -> None:
+    """`--end-action land`: the flight ends (here by --duration) with the autopilot in AUTO.LAND, exit 0."""
+    config = write_config(tmp_path)
+    with spawn(mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)))) as mock:
+        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--duration", "2", "--end-action", "land")
+    assert outcome.exit_code == 0, outcome.reason
+    assert "AUTO.LAND" in outcome.reason
+    entries = read_tlog(tmp_path / "log" / "flight.tlog")
+    modes = [e.message.custom_mode for e in entries if e.direction == "in" and e.message.get_type() == "HEARTBEAT"]
+    assert modes[-1] == PX4.land_custom_mode != PX4.hold_custom_mode
