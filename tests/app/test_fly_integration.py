@@ -303,3 +303,18 @@ def test_requests_the_telemetry_it_needs_at_the_setpoint_rate(tmp_path, state_so
     assert requests == {state_id: 1e6 / RATE_HZ, 31: 1e6 / RATE_HZ, 0: 1e5}
     acks = [e.message.result for e in entries if e.direction == "in" and e.message.get_type() == "COMMAND_ACK" and e.message.command == 511]
     assert acks and set(acks) == {0}  # MAV_RESULT_ACCEPTED
+
+
+def test_implausible_hover_thrust_parameter_is_refused(tmp_path) -> None:
+    """attitude / rates normalise thrust with the autopilot's MPC_THR_HOVER: a value outside
+    [0.05, 0.95] is a link error (exit 3) before any mode change, never a misread thrust."""
+    config = write_config(tmp_path)
+    with run_in_thread(mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)))) as mock:
+        mock.call(lambda m: m.autopilot.params.update(MPC_THR_HOVER=0.99))
+        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--output", "attitude", "--duration", "2")
+        assert mock.call(lambda m: m.autopilot.mode.name) != "OFFBOARD"
+    assert outcome.exit_code == 3
+    assert "MPC_THR_HOVER = 0.99 is not a plausible hover thrust" in outcome.reason
+    out = [e.message for e in read_tlog(tmp_path / "log" / "flight.tlog") if e.direction == "out"]
+    assert any(m.get_type() == "PARAM_REQUEST_READ" and m.param_id == "MPC_THR_HOVER" for m in out)
+    assert not [m for m in out if m.get_type() == "COMMAND_LONG" and m.command == 176]  # no mode request
