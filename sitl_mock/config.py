@@ -149,6 +149,10 @@ class MockConfig:
             port = getattr(self, name)
             if port is not None and not (0 <= port <= 65535):
                 raise MockConfigError(name, f"port out of range: {port}")
+        if self.udp_remote is not None:
+            host, port = self.udp_remote
+            if host not in ("127.0.0.1", "localhost") or isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
+                raise MockConfigError("udp_remote", f"must be (127.0.0.1, port 1..65535), got {self.udp_remote!r}")
         if self.udp_local_port is None and self.tcp_port is None:
             raise MockConfigError("transports", "enable UDP and/or TCP")
         if self.host not in ("127.0.0.1", "localhost", "::1"):

@@ -100,3 +100,21 @@ def test_spawned_mock_stops_cleanly_and_flushes_the_truth_log(tmp_path) -> None:
     handle = spawn(config)
     assert handle.stop() == 0  # SIGTERM → clean shutdown, exit code 0
     assert log.read_text().startswith("time_s,")
+
+
+@pytest.mark.parametrize(
+    ("changes", "field"),
+    [
+        ({"udp_remote": ("10.0.0.1", 14540)}, "udp_remote"),
+        ({"udp_remote": ("127.0.0.1", 0)}, "udp_remote"),
+        ({"seed": -3}, "seed"),
+        ({"seed": 1.5}, "seed"),
+        ({"duration_s": float("inf")}, "duration_s"),
+        ({"speed": float("nan")}, "speed"),
+    ],
+)
+def test_python_api_config_is_validated_like_the_flags(changes: dict, field: str) -> None:
+    from sitl_mock.config import MockConfigError
+
+    with pytest.raises(MockConfigError, match=field):
+        MockConfig(**changes).validate()
