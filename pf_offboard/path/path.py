@@ -70,6 +70,11 @@ class FrameDerivs(NamedTuple):
     dde3: NDArray[np.float64]
 
 
+def _check_finite(value: float, name: str) -> None:
+    if not math.isfinite(value):
+        raise InputError(name, f"not finite: {value}")
+
+
 def _validate(points: ArrayLike, closed: bool) -> NDArray[np.float64]:
     if not isinstance(closed, (bool, np.bool_)):
         raise InputError("closed", f"must be true or false, got {closed!r}")
@@ -172,6 +177,8 @@ class Path:
     def wrap(self, lam: float) -> float:
         """Into [0, lam_max) for closed paths (periodic), clamped to [0, lam_max] for open ones."""
         lam = float(lam)
+        if not 0.0 <= lam <= self.lam_max:  # (NaN fails this test too) the check costs nothing in range
+            _check_finite(lam, "lam")
         if self.closed:
             r = lam % self.lam_max
             return 0.0 if r >= self.lam_max else r
@@ -179,9 +186,11 @@ class Path:
 
     def _inrange(self, lam: float) -> float:
         # Closed: periodic. Open: no clamping, the end polynomials extend the curve smoothly.
-        if self.closed and not 0.0 <= lam < self.lam_max:
-            r = lam % self.lam_max
-            return 0.0 if r >= self.lam_max else r
+        if not 0.0 <= lam < self.lam_max:
+            _check_finite(lam, "lam")
+            if self.closed:
+                r = lam % self.lam_max
+                return 0.0 if r >= self.lam_max else r
         return lam
 
     # ------------------------------------------------------------------ geometry
@@ -272,6 +281,7 @@ class Path:
     def lam_at_arclength(self, s_m: float) -> float:
         """Inverse of :meth:`arclength` (Newton to 1e-13). Closed: s wraps; open: clamped."""
         s = float(s_m)
+        _check_finite(s, "s_m")
         if self.closed:
             s %= self.length_m
         else:

@@ -179,3 +179,17 @@ def test_arclength_inverse_near_the_seam(paper):
         got = paper.arclength(lam)
         # s just below L maps to lam just below lam_max or (rounding) to 0: both are the seam.
         assert min(abs(got - expect), abs(abs(got - expect) - L)) < 1e-9
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), float("-inf")])
+@pytest.mark.parametrize("name", ["paper", "helix"])
+def test_non_finite_parameter_is_an_error_not_nan(name, bad, request):
+    """Every query by lambda (or arclength) refuses NaN/inf with an InputError naming it."""
+    from pf_offboard.errors import InputError
+
+    path = request.getfixturevalue(name)
+    for query in (path.eval, path.eval_floats, path.frame, path.curvature, path.arclength, path.wrap):
+        with pytest.raises(InputError, match="lam"):
+            query(bad)
+    with pytest.raises(InputError, match="s_m"):
+        path.lam_at_arclength(bad)
