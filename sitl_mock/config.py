@@ -37,6 +37,16 @@ class SpawnSpec:
     position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     velocity_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
+    def validate(self) -> None:
+        if self.kind not in ("ground", "hover", "throw"):
+            raise MockConfigError("spawn", f"unknown kind {self.kind!r}")
+        for name in ("position_ned_m", "velocity_ned_m_s"):
+            value = getattr(self, name)
+            if len(value) != 3 or not all(math.isfinite(v) for v in value):
+                raise MockConfigError(f"spawn.{name}", f"must be 3 finite numbers, got {value!r}")
+        if self.kind != "ground" and self.position_ned_m[2] > 0.0:
+            raise MockConfigError("spawn.position_ned_m", f"z must be <= 0 (NED, z = -altitude), got {self.position_ned_m[2]}")
+
     @staticmethod
     def parse(text: str) -> SpawnSpec:
         """``ground`` | ``hover:x,y,z`` | ``throw:x,y,z,vx,vy,vz`` (NED: z = -altitude)."""
@@ -100,6 +110,10 @@ class FaultConfig:
         for name in ("estimator_reset_ned_m", "gust_ned_m_s"):
             if not all(math.isfinite(v) for v in getattr(self, name)):
                 raise MockConfigError(f"faults.{name}", "values must be finite")
+        for name in ("estimator_reset_at_s", "takeover_at_s", "gust_at_s"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value >= 0.0):
+                raise MockConfigError(f"faults.{name}", f"must be a finite time >= 0 s, got {value}")
 
 
 @dataclass(frozen=True)
@@ -161,8 +175,12 @@ class MockConfig:
             raise MockConfigError("duration_s", f"must be finite and > 0 s, got {self.duration_s}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise MockConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
-        if self.spawn.kind not in ("ground", "hover", "throw"):
-            raise MockConfigError("spawn", f"unknown kind {self.spawn.kind!r}")
+        self.spawn.validate()
+        if not (math.isfinite(self.home_lat_deg) and abs(self.home_lat_deg) <= 90.0
+                and math.isfinite(self.home_lon_deg) and abs(self.home_lon_deg) <= 180.0
+                and math.isfinite(self.home_alt_m)):
+            raise MockConfigError("home", f"need finite lat in [-90, 90], lon in [-180, 180], alt; got "
+                                  f"{(self.home_lat_deg, self.home_lon_deg, self.home_alt_m)}")
         self.faults.validate()
 
     def rng(self) -> np.random.Generator:

@@ -118,3 +118,24 @@ def test_python_api_config_is_validated_like_the_flags(changes: dict, field: str
 
     with pytest.raises(MockConfigError, match=field):
         MockConfig(**changes).validate()
+
+
+@pytest.mark.parametrize(
+    ("changes", "field"),
+    [
+        ({"spawn": SpawnSpec("hover", (float("nan"), 0.0, -1.0))}, "spawn.position_ned_m"),
+        ({"spawn": SpawnSpec("throw", (0.0, 0.0, -1.0), (0.0, float("inf"), 0.0))}, "spawn.velocity_ned_m_s"),
+        ({"spawn": SpawnSpec("hover", (0.0, 0.0, 5.0))}, "spawn.position_ned_m"),
+        ({"spawn": SpawnSpec("orbit")}, "spawn"),
+        ({"home_lat_deg": float("nan")}, "home"),
+        ({"faults": FaultConfig(gust_at_s=float("nan"))}, "faults.gust_at_s"),
+        ({"faults": FaultConfig(takeover_at_s=-1.0)}, "faults.takeover_at_s"),
+        ({"faults": FaultConfig(estimator_reset_at_s=float("inf"))}, "faults.estimator_reset_at_s"),
+    ],
+)
+def test_python_api_spawn_home_and_fault_times_are_validated(changes: dict, field: str) -> None:
+    from sitl_mock.config import MockConfigError
+
+    with pytest.raises(MockConfigError) as err:
+        MockConfig(**changes).validate()
+    assert err.value.field == field
