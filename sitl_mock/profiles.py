@@ -181,7 +181,7 @@ class Profile:
         for spec in self.modes:
             if spec.name == name:
                 return spec
-        raise KeyError(name)
+        raise ValueError(f"mode: {name!r} is unknown for {self.name} (one of {[m.name for m in self.modes]})")
 
     def mode_by_custom(self, custom_mode: int) -> ModeSpec | None:
         for spec in self.modes:
