@@ -289,21 +289,6 @@ def test_end_action_land_hands_back_in_land_mode(tmp_path) -> None:
     assert modes[-1] == PX4.land_custom_mode != PX4.hold_custom_mode
 
 
-@pytest.mark.parametrize(("state_source", "state_id"), [("local_position", 32), ("odometry", 331)])
-def test_requests_the_telemetry_it_needs_at_the_setpoint_rate(tmp_path, state_source: str, state_id: int) -> None:
-    """SET_MESSAGE_INTERVAL (COMMAND_LONG 511) to the target for the state stream and
-    ATTITUDE_QUATERNION at the setpoint rate, HEARTBEAT at 10 Hz; the autopilot accepts each."""
-    config = write_config(tmp_path)
-    with spawn(mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)))) as mock:
-        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--duration", "1", "--state-source", state_source)
-    assert outcome.exit_code == 0, outcome.reason
-    entries = read_tlog(tmp_path / "log" / "flight.tlog")
-    requests = {int(m.param1): m.param2 for m in (e.message for e in entries if e.direction == "out")
-                if m.get_type() == "COMMAND_LONG" and m.command == 511 and (m.target_system, m.target_component) == (1, 1)}  # fmt: skip
-    assert requests == {state_id: 1e6 / RATE_HZ, 31: 1e6 / RATE_HZ, 0: 1e5}
-    acks = [e.message.result for e in entries if e.direction == "in" and e.message.get_type() == "COMMAND_ACK" and e.message.command == 511]
-    assert acks and set(acks) == {0}  # MAV_RESULT_ACCEPTED
-
 
 def test_implausible_hover_thrust_parameter_is_refused(tmp_path) -> None:
     """attitude / rates normalise thrust with the autopilot's MPC_THR_HOVER: a value outside
