@@ -6,7 +6,8 @@ Pure: messages in, :class:`StateEstimate` out; no clocks, no I/O. The one place 
 Sources: position + velocity from LOCAL_POSITION_NED or ODOMETRY (whichever arrives first is
 used from then on, so one sample is never counted twice); attitude and body rates from
 ATTITUDE_QUATERNION (or ODOMETRY's pose when that is the source). Non-finite or malformed
-samples are rejected and counted, never passed to the controller.
+samples are rejected and counted, never passed to the controller; so are duplicated or reordered
+ones (a sample time not newer than the last), which are not fresh.
 """
 
 from __future__ import annotations
@@ -58,6 +59,12 @@ def _unit_quat(q: Any) -> NDArray[np.float64] | None:
     if abs(n - 1.0) > 1e-2:  # MAVLink quaternions are unit; anything else is corrupt
         return None
     return a / n
+
+
+# A sample not newer than the last one, by less than this, is a duplicated or reordered datagram
+# (not fresh: it must not step the controller or feed the stale-state watchdog). Older by more,
+# the autopilot's boot clock restarted (a reboot): accepted, following starts over from it.
+REORDER_WINDOW_S = 10.0
 
 
 class Estimator:
@@ -125,8 +132,18 @@ class Estimator:
         )
         return True
 
+    def _not_newer(self, time_s: float) -> bool:
+        """True (and counted as rejected) for a duplicated or reordered sample."""
+        last = self._latest
+        if last is not None and 0.0 <= last.time_s - time_s < REORDER_WINDOW_S:
+            self.rejected += 1
+            return True
+        return False
+
     def _local_position(self, msg: Any) -> bool:
         values = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz)
+        if self._not_newer(msg.time_boot_ms * 1e-3):
+            return False
         if not _finite(*values):
             self.rejected += 1
             return False
@@ -137,6 +154,8 @@ class Estimator:
     def _odometry(self, msg: Any) -> bool:
         if msg.frame_id != MAV_FRAME_LOCAL_NED:  # LOCAL_FRD is heading-aligned, not NED
             self.rejected += 1
+            return False
+        if self._not_newer(msg.time_usec * 1e-6):
             return False
         pos = np.array((msg.x, msg.y, msg.z), dtype=float)
         vel = np.array((msg.vx, msg.vy, msg.vz), dtype=float)

@@ -72,3 +72,20 @@ def test_odometry_in_a_non_ned_frame_is_rejected() -> None:
     est = Estimator("odometry")
     assert not est.on_message(odometry(1, (0, 0, 0), (0, 0, 0), frame=20))
     assert est.rejected == 1
+
+
+def test_duplicated_or_reordered_samples_are_not_fresh() -> None:
+    """A UDP duplicate or an older sample does not step the controller; a clock restart
+    (autopilot reboot: time jumps back by more than the window) is accepted."""
+    est = Estimator("local_position")
+    assert est.on_message(local_position(5000, (1.0, 0.0, -2.0)))
+    assert not est.on_message(local_position(5000, (1.0, 0.0, -2.0)))  # duplicate
+    assert not est.on_message(local_position(4996, (0.9, 0.0, -2.0)))  # reordered
+    assert est.latest is not None and est.latest.position_enu_m[1] == 1.0 and est.rejected == 2
+    assert est.on_message(local_position(5004, (1.1, 0.0, -2.0)))
+    est2 = Estimator("local_position")
+    assert est2.on_message(local_position(60_000))
+    assert est2.on_message(local_position(10))  # rebooted
+    odo = Estimator("odometry")
+    assert odo.on_message(odometry(7_000_000, (0.0, 0.0, -1.0), (0.0, 0.0, 0.0)))
+    assert not odo.on_message(odometry(7_000_000, (0.0, 0.0, -1.0), (0.0, 0.0, 0.0)))
