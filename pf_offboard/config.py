@@ -261,6 +261,9 @@ TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight")
 
 def parse_config(data: Any, source: str = "<config>") -> Config:
     """Validate a parsed YAML mapping into a :class:`Config` (ENU)."""
+    if data is not None and not isinstance(data, Mapping):
+        # Name the file: "<top level>" alone does not say which config was wrong.
+        raise ConfigError(source, f"must be a mapping of sections ({', '.join(TOP_LEVEL)}), got {type(data).__name__}")
     d = _section(data, "", TOP_LEVEL, required=True) if data is not None else None
     if d is None:
         raise ConfigError("path", "missing (required section); the config is empty")

@@ -106,7 +106,7 @@ BAD = [
     ({"path": {"waypoints": [[0, 0, 1], [1, 0, 1], [1, 0, 1], [2, 2, 2]]}}, "path.waypoints[2]", "duplicate"),
     ({"path": {"closed": True, "waypoints": [[0, 0, 1], [1, 0, 1]]}}, "path.waypoints", "at least 3"),
     ({"path": {"moving_frame": "frenet", "waypoints": [[0, 0, 1], [1, 1, 1], [2, 2, 1]]}}, "path.moving_frame", "frenet"),
-    ([1, 2, 3], "<top level>", "mapping"),
+    ([1, 2, 3], "<config>", "mapping"),
 ]
 
 
@@ -225,3 +225,12 @@ def test_every_section_must_be_a_mapping(section):
     with pytest.raises(ConfigError) as err:
         parse_config(minimal(**{section: [1, 2]}))
     assert err.value.field == section and "mapping" in err.value.reason
+
+
+def test_a_config_that_is_not_a_mapping_names_the_file(tmp_path):
+    bad = tmp_path / "list.yaml"
+    bad.write_text("- [0, 0, 1]\n- [1, 0, 1]\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(bad)
+    assert err.value.field == str(bad)
+    assert "must be a mapping of sections" in err.value.reason
