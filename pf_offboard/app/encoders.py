@@ -152,6 +152,13 @@ class Encoder:
         self.hover_thrust = hover_thrust
         self.time_constant_s = time_constant_s
 
+    def with_hover_thrust(self, hover_thrust: float) -> Encoder:
+        """The same encoder with the hover thrust read from the autopilot (validated like __init__)."""
+        return Encoder(
+            self.output_mode, self.profile, self.target_system, self.target_component,
+            hover_thrust=hover_thrust, time_constant_s=self.time_constant_s,
+        )  # fmt: skip
+
     # ------------------------------------------------------------------ path-following setpoints
     def encode(self, cmd: CommandLike, est: StateEstimate, time_boot_ms: int) -> Encoded:
         """The setpoint for a core command; the safe hold if anything is not finite."""

@@ -210,7 +210,12 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             state_timeout_s=settings.state_timeout_s,
             status=not args.quiet,
         )
-        pipeline = Pipeline(follower, Encoder(settings.output_mode, profile, target.system, target.component), Estimator(args.state_source))
+        encoder = Encoder(
+            settings.output_mode, profile, target.system, target.component,
+            hover_thrust=settings.hover_thrust if settings.hover_thrust is not None else 0.5,
+            time_constant_s=settings.attitude_time_constant_s,
+        )  # fmt: skip
+        pipeline = Pipeline(follower, encoder, Estimator(args.state_source))
         bridge = Bridge(
             link, profile, pipeline, options, path.length_m, path.closed, path.lam_max,
             on_step=lambda step: flight_log.step(step.record),  # the CSV, not memory: flights can be long
@@ -224,15 +229,11 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             state_id = mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED if args.state_source == "local_position" else mavlink2.MAVLINK_MSG_ID_ODOMETRY
             for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
                 bridge.request_interval(msg_id, rate)
-            hover = settings.hover_thrust
-            if hover is None and settings.output_mode != "acceleration":
+            if settings.hover_thrust is None and settings.output_mode != "acceleration":
                 hover = await bridge.read_param(profile.hover_thrust_param)
                 if not 0.05 <= hover <= 0.95:
                     raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
-            pipeline.encoder = Encoder(
-                settings.output_mode, profile, target.system, target.component,
-                hover_thrust=float(hover) if hover is not None else 0.5, time_constant_s=settings.attitude_time_constant_s,
-            )  # fmt: skip
+                pipeline.encoder = pipeline.encoder.with_hover_thrust(float(hover))
             if profile.autopilot is Autopilot.ARDUPILOT:
                 await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
                 if settings.output_mode == "acceleration":

@@ -254,12 +254,15 @@ def build_pipeline(
     hover = options.hover_thrust if options.hover_thrust is not None else settings.hover_thrust
     if hover is None:
         hover = _hover_from_log(entries, profile.hover_thrust_param)
-    encoder = Encoder(output_mode, profile, target_system, target_component)
-    if hover is not None:
-        encoder.hover_thrust = float(hover)
-    elif output_mode != "acceleration":
+    if hover is None and output_mode != "acceleration":
         raise InputError("--hover-thrust", f"the log has no {profile.hover_thrust_param} value and the config none; pass --hover-thrust")
-    encoder.time_constant_s = settings.attitude_time_constant_s
+    if hover is not None and not (math.isfinite(hover) and 0.0 < hover < 1.0):
+        raise InputError("LOG", f"logged {profile.hover_thrust_param} = {hover!r} is not a normalised hover thrust in (0, 1)")
+    encoder = Encoder(
+        output_mode, profile, target_system, target_component,
+        hover_thrust=float(hover) if hover is not None else 0.5,
+        time_constant_s=settings.attitude_time_constant_s,
+    )  # fmt: skip
     if follower is None:
         follower = PathFollower.from_config(config)
     source = options.state_source or _state_source_of(entries)

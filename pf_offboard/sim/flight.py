@@ -177,8 +177,11 @@ class SimFlight:
         follower = PathFollower.from_config(config)
         self.path = follower.path
         self.profile = PROFILES[spec.autopilot]
-        encoder = Encoder(settings.output_mode, self.profile, AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID)
-        encoder.time_constant_s = settings.attitude_time_constant_s
+        encoder = Encoder(
+            settings.output_mode, self.profile, AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID,
+            hover_thrust=settings.hover_thrust if settings.hover_thrust is not None else 0.5,
+            time_constant_s=settings.attitude_time_constant_s,
+        )  # fmt: skip
         self.pipeline = Pipeline(follower, encoder, Estimator("local_position"))
         self.laps = LapCounter(self.path.length_m, self.path.closed)
         self.end = EndSpec(laps=spec.laps, duration_s=None)
@@ -266,7 +269,7 @@ class SimFlight:
             pid = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
             if pid.rstrip("\x00") == self.profile.hover_thrust_param and self.settings.hover_thrust is None:
                 value = param_value_decode(msg.param_value, msg.param_type, self.profile.name == "px4")
-                self.pipeline.encoder.hover_thrust = float(value)
+                self.pipeline.encoder = self.pipeline.encoder.with_hover_thrust(float(value))
             return
         if kind == "COMMAND_ACK":
             if msg.command == mavlink.MAV_CMD_DO_SET_MODE and self._mode_requested and self.phase == "engaging":

@@ -124,3 +124,15 @@ def test_ardupilot_acceleration_carries_the_measured_velocity() -> None:
     assert m.type_mask == 0x007  # velocity + acceleration + yaw + yaw rate
     assert (m.vx, m.vy, m.vz) == pytest.approx((2.0, 1.0, 0.5))  # ENU -> NED
     assert (m.afx, m.afy, m.afz) == pytest.approx((-0.25, 0.5, -0.1))
+
+
+def test_with_hover_thrust_keeps_everything_else_and_validates() -> None:
+    enc = Encoder("rates", ARDUPILOT, 3, 7, hover_thrust=0.5, time_constant_s=0.05)
+    new = enc.with_hover_thrust(0.37)
+    assert (new.output_mode, new.profile, new.target_system, new.target_component) == ("rates", ARDUPILOT, 3, 7)
+    assert (new.hover_thrust, new.time_constant_s) == (0.37, 0.05)
+    assert enc.hover_thrust == 0.5  # a copy: the original is untouched
+    cmd = command(thrust=9.81)
+    assert new.encode(cmd, estimate(), 0).message.thrust == pytest.approx(0.37, rel=1e-6)
+    with pytest.raises(ValueError, match="hover_thrust"):
+        enc.with_hover_thrust(1.5)
