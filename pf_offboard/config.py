@@ -12,10 +12,10 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
-from pf_offboard.control.types import GRAVITY_M_S2, MIN_THRUST_FLOOR_M_S2, Gains, Limits, YawSpec
+from pf_offboard.control.types import GRAVITY_M_S2, MIN_THRUST_FLOOR_M_S2, Gains, Limits, VehicleModel, YawSpec
 from pf_offboard.errors import ConfigError, InputError
 from pf_offboard.frames import ned_to_enu, yaw_ned_to_enu, yaw_rate_ned_to_enu
 
@@ -58,6 +58,7 @@ class Config:
     yaw: YawSpec = field(default_factory=YawSpec)
     limits: Limits = field(default_factory=Limits)
     flight: FlightConfig = field(default_factory=FlightConfig)
+    vehicle: VehicleModel = field(default_factory=VehicleModel)
     source: str = "<config>"
 
 
@@ -256,7 +257,22 @@ def _flight(data: Any) -> FlightConfig:
     )
 
 
-TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight")
+def _vehicle(data: Any) -> VehicleModel:
+    """``vehicle:`` section (written by ``pf-offboard identify``); keys are VehicleModel's fields."""
+    names = tuple(f.name for f in fields(VehicleModel))
+    d = _section(data, "vehicle", names)
+    default = VehicleModel()
+    vals = {}
+    for name in names:
+        lo, hi = (0.2, 5.0) if name.startswith("accel_gain") else (0.0, 10.0)
+        vals[name] = _number(d, name, f"vehicle.{name}", getattr(default, name), lo, hi)
+    try:
+        return VehicleModel(**vals)  # type: ignore[arg-type]
+    except InputError as exc:
+        raise ConfigError(exc.field, exc.reason) from None
+
+
+TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle")
 
 
 def parse_config(data: Any, source: str = "<config>") -> Config:
@@ -279,6 +295,7 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
         yaw=_yaw(d.get("yaw"), path.frame, path.closed),
         limits=_limits(d.get("limits")),
         flight=_flight(d.get("flight")),
+        vehicle=_vehicle(d.get("vehicle")),
         source=source,
     )
 

@@ -12,6 +12,7 @@ from pf_offboard.control.types import (
     Limits,
     Saturation,
     TransverseState,
+    VehicleModel,
     YawSpec,
 )
 
@@ -24,6 +25,7 @@ __all__ = [
     "PathFollower",
     "Saturation",
     "TransverseState",
+    "VehicleModel",
     "YawSpec",
     "evaluate_terms",
     "exact_terms",

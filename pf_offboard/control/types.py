@@ -131,6 +131,45 @@ class Limits:
         return min(cone, self.max_thrust_m_s2 - g, g - self.min_thrust_m_s2)
 
 
+@dataclass(frozen=True)
+class VehicleModel:
+    """Identified response of the vehicle + autopilot inner loops to an acceleration setpoint.
+
+    Per axis group (horizontal x/y, vertical z), world frame, velocity v and wind w:
+    ``dv/dt = a + d``, ``a(s) = gain * exp(-delay s) / (lag s + 1) * a_sp(s) - drag * (v - w)``
+    (``d``: what the model does not explain, estimated by the disturbance observer).
+    ``rate_time_constant_s``: the autopilot's closed body-rate loop (first-order), used by the
+    ``rates`` output's attitude loop. Written by ``pf-offboard identify`` as the ``vehicle:``
+    config section; the defaults are an ideal inner loop (the paper's assumption).
+    """
+
+    accel_lag_xy_s: float = 0.0
+    accel_lag_z_s: float = 0.0
+    accel_delay_s: float = 0.0
+    accel_gain_xy: float = 1.0
+    accel_gain_z: float = 1.0
+    drag_xy_1_s: float = 0.0
+    drag_z_1_s: float = 0.0
+    rate_time_constant_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        bounds = {
+            "accel_lag_xy_s": (0.0, 2.0),
+            "accel_lag_z_s": (0.0, 2.0),
+            "accel_delay_s": (0.0, 1.0),
+            "accel_gain_xy": (0.2, 5.0),
+            "accel_gain_z": (0.2, 5.0),
+            "drag_xy_1_s": (0.0, 10.0),
+            "drag_z_1_s": (0.0, 10.0),
+            "rate_time_constant_s": (0.0, 1.0),
+        }
+        for name, (lo, hi) in bounds.items():
+            v = _finite(f"vehicle.{name}", getattr(self, name))
+            if not lo <= v <= hi:
+                raise InputError(f"vehicle.{name}", f"must be in [{lo:g}, {hi:g}], got {v:g}")
+            object.__setattr__(self, name, v)
+
+
 YAW_MODES = ("constant", "tangent", "table")
 
 
