@@ -51,6 +51,17 @@ class FlightConfig:
 
 
 @dataclass(frozen=True)
+class CompensationConfig:
+    """Inner-loop compensation (pf_offboard.control.compensator): observer + delay predictor +
+    gain/drag inversion + integral action, from the ``vehicle:`` model."""
+
+    enabled: bool = True
+    observer_rad_s: float = 8.0  # disturbance-observer poles (rad/s)
+    integral_rad_s: float = 1.0  # integral action on speed and transversal offsets (rad/s)
+    phase_margin_deg: float = 30.0  # for gains: auto (pf_offboard.control.tuning)
+
+
+@dataclass(frozen=True)
 class Config:
     path: PathConfig
     speed_m_s: float = 1.0
@@ -58,7 +69,9 @@ class Config:
     yaw: YawSpec = field(default_factory=YawSpec)
     limits: Limits = field(default_factory=Limits)
     flight: FlightConfig = field(default_factory=FlightConfig)
-    vehicle: VehicleModel = field(default_factory=VehicleModel)
+    vehicle: VehicleModel = field(default_factory=VehicleModel.typical)
+    compensation: CompensationConfig = field(default_factory=CompensationConfig)
+    gains_auto: bool = False  # gains derived from the vehicle model (gains: auto or no gains section)
     source: str = "<config>"
 
 
@@ -257,11 +270,22 @@ def _flight(data: Any) -> FlightConfig:
     )
 
 
+def _compensation(data: Any) -> CompensationConfig:
+    d = _section(data, "compensation", ("enabled", "observer_rad_s", "integral_rad_s", "phase_margin_deg"))
+    c = CompensationConfig()
+    return CompensationConfig(
+        enabled=_bool(d, "enabled", "compensation.enabled", c.enabled),
+        observer_rad_s=_number(d, "observer_rad_s", "compensation.observer_rad_s", c.observer_rad_s, 0.0, 50.0),  # type: ignore[arg-type]
+        integral_rad_s=_number(d, "integral_rad_s", "compensation.integral_rad_s", c.integral_rad_s, 0.0, 10.0),  # type: ignore[arg-type]
+        phase_margin_deg=_number(d, "phase_margin_deg", "compensation.phase_margin_deg", c.phase_margin_deg, 10.0, 80.0),  # type: ignore[arg-type]
+    )
+
+
 def _vehicle(data: Any) -> VehicleModel:
     """``vehicle:`` section (written by ``pf-offboard identify``); keys are VehicleModel's fields."""
     names = tuple(f.name for f in fields(VehicleModel))
     d = _section(data, "vehicle", names)
-    default = VehicleModel()
+    default = VehicleModel.typical()
     vals = {}
     for name in names:
         lo, hi = (0.2, 5.0) if name.startswith("accel_gain") else (0.0, 10.0)
@@ -272,7 +296,7 @@ def _vehicle(data: Any) -> VehicleModel:
         raise ConfigError(exc.field, exc.reason) from None
 
 
-TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle")
+TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle", "compensation")
 
 
 def parse_config(data: Any, source: str = "<config>") -> Config:
@@ -288,14 +312,29 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
     assert speed is not None
     if speed == 0.0:
         raise ConfigError("speed_m_s", "must be non-zero (its sign picks the direction of travel)")
+    vehicle = _vehicle(d.get("vehicle"))
+    compensation = _compensation(d.get("compensation"))
+    raw_gains = d.get("gains")
+    # gains: auto (or no gains section): derived from the vehicle model with a phase margin
+    gains_auto = raw_gains is None or raw_gains == "auto"
+    if gains_auto:
+        from pf_offboard.control.tuning import gains_for_vehicle
+
+        gains = gains_for_vehicle(vehicle, compensation.phase_margin_deg)
+    elif isinstance(raw_gains, str):
+        raise ConfigError("gains", f"must be 'auto' or a mapping (transversal, tangential), got {raw_gains!r}")
+    else:
+        gains = _gains(raw_gains)
     return Config(
         path=path,
         speed_m_s=speed,
-        gains=_gains(d.get("gains")),
+        gains=gains,
+        gains_auto=gains_auto,
+        compensation=compensation,
         yaw=_yaw(d.get("yaw"), path.frame, path.closed),
         limits=_limits(d.get("limits")),
         flight=_flight(d.get("flight")),
-        vehicle=_vehicle(d.get("vehicle")),
+        vehicle=vehicle,
         source=source,
     )
 

@@ -11,6 +11,8 @@ import yaml
 
 from pf_offboard import PathFollower, load_config, parse_config
 from pf_offboard.config import Config, FlightConfig
+from pf_offboard.control.tuning import gains_for_vehicle
+from pf_offboard.control.types import VehicleModel
 from pf_offboard.control.types import Gains, Limits
 from pf_offboard.errors import ConfigError, InputError
 
@@ -43,7 +45,11 @@ def test_paper_config_is_the_paper_setting():
 def test_defaults_for_everything_but_the_path():
     cfg = parse_config(minimal())
     assert cfg.speed_m_s == 1.0
-    assert cfg.gains == Gains()
+    # no gains section: derived from the (typical) vehicle model, far below the paper's ideal ones
+    assert cfg.gains_auto and cfg.vehicle == VehicleModel.typical()
+    assert cfg.gains == gains_for_vehicle(VehicleModel.typical(), cfg.compensation.phase_margin_deg)
+    assert 0.3 < cfg.gains.transversal_bandwidth_hz < Gains().transversal_bandwidth_hz / 3
+    assert cfg.compensation.enabled
     assert cfg.limits == Limits()
     assert cfg.flight == FlightConfig()
     assert cfg.path.frame == "enu" and cfg.path.moving_frame == "auto"

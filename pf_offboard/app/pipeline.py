@@ -56,6 +56,9 @@ class Pipeline:
         self.estimator = estimator if estimator is not None else Estimator()
         self._stepped_sample = 0
         self.replaced_steps = 0  # steps where the safe hold was sent instead of the command
+        # a follower with inner-loop compensation needs each sample's time (observer, predictor)
+        self._timed = getattr(follower, "compensator", None) is not None
+        self._was_active = False
         speed = getattr(follower, "speed", math.nan)
         self.speed_ref_m_s = float(speed) if isinstance(speed, (int, float)) else math.nan
 
@@ -81,13 +84,22 @@ class Pipeline:
             return None
         self._stepped_sample = est.sample
         events = [event] if event else []
+        if active and not self._was_active and self._timed:
+            # activation: what the observer learnt while the setpoints were not flown (a throw in
+            # free fall, the proof-of-life stream) is not the vehicle's response: start over
+            self.follower.reset()
+            events.append("compensator_reset")
+        self._was_active = active
         if self.estimator.reset_pending:
             self.estimator.reset_pending = False
             self.follower.reset()  # the position may have jumped: redo the global projection
             events.append("estimator_reset")
         stamp = time_boot_ms(est)
         try:
-            cmd = self.follower.update(est.position_enu_m, est.velocity_enu_m_s)
+            if self._timed:
+                cmd = self.follower.update(est.position_enu_m, est.velocity_enu_m_s, time_s=est.time_s)
+            else:
+                cmd = self.follower.update(est.position_enu_m, est.velocity_enu_m_s)
         except (ArithmeticError, ValueError) as exc:  # never let a core failure become silence
             cmd = None
             encoded = self.encoder.hold(est, stamp, f"controller failed: {exc}")

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pf_offboard.control.compensator import InnerLoopCompensator
 from pf_offboard.control.feedforward import (
     YawProfile,
     attitude_from_thrust,
@@ -113,6 +114,7 @@ class PathFollower:
         yaw: YawSpec | None = None,
         limits: Limits | None = None,
         projector: Any = None,
+        compensator: InnerLoopCompensator | None = None,
     ) -> None:
         try:
             speed = float(speed)
@@ -130,6 +132,14 @@ class PathFollower:
 
             projector = Projector(path)
         self.projector = projector
+        # Inner-loop compensation (observer + predictor + inversion); None: the paper's ideal
+        # inner loop. The measured state then gets its own projector for honest reporting.
+        self.compensator = compensator
+        self._measured_projector: Any = None
+        if compensator is not None:
+            from pf_offboard.path import Projector
+
+            self._measured_projector = Projector(path)
         self.law = ControlLaw(self.gains, self.limits)
         self._yaw = YawProfile(self.yaw, path.length_m, path.closed, speed)
         self._closed = bool(path.closed)
@@ -147,11 +157,24 @@ class PathFollower:
 
         cfg = config if isinstance(config, Config) else load_config(config)
         path = Path.from_waypoints(cfg.path.waypoints_enu_m, closed=cfg.path.closed, frame=cfg.path.moving_frame)
-        return cls(path, cfg.speed_m_s, gains=cfg.gains, yaw=cfg.yaw, limits=cfg.limits)
+        comp = None
+        if cfg.compensation.enabled:
+            c = cfg.compensation
+            comp = InnerLoopCompensator(
+                cfg.vehicle,
+                observer_rad_s=c.observer_rad_s,
+                speed_integral_rad_s=c.integral_rad_s,
+                offset_integral_rad_s=c.integral_rad_s,
+            )
+        return cls(path, cfg.speed_m_s, gains=cfg.gains, yaw=cfg.yaw, limits=cfg.limits, compensator=comp)
 
     def reset(self) -> None:
-        """Forget the projection warm start (e.g. after an estimator reset or a position jump)."""
+        """Forget the projection warm start and the compensator's state (activation, estimator
+        reset, position jump)."""
         self.projector.reset()
+        if self.compensator is not None:
+            self.compensator.reset()
+            self._measured_projector.reset()
 
     # ------------------------------------------------------------------ exact coordinates
     def _terms(self, y: Vec, v: Vec) -> tuple[float, tuple[float, ...], ExactTerms]:
@@ -181,13 +204,28 @@ class PathFollower:
         stop = self.law.stopping_speed(ahead)
         return self.speed if abs(self.speed) <= stop else math.copysign(stop, self.speed)
 
-    def update(self, position: ArrayLike, velocity: ArrayLike) -> Command:
+    def update(self, position: ArrayLike, velocity: ArrayLike, time_s: float | None = None) -> Command:
         """One control step at position (m) and velocity (m/s), world ENU.
+
+        ``time_s``: the sample's time (s, any monotonic clock: the autopilot's boot time). With a
+        :attr:`compensator` it drives the disturbance observer and the delay predictor (the law
+        then acts on the predicted state and the command is the inverted setpoint); without a
+        time, or without a compensator, the step is the paper's stateless law.
 
         Raises :class:`InputError` for non-finite input (never a command computed from NaN).
         """
         y = _vec(position, "position", MAX_POSITION_ABS_M)
         v = _vec(velocity, "velocity", MAX_VELOCITY_ABS_M_S)
+        comp = self.compensator if time_s is not None else None
+        y_meas, v_meas = y, v
+        if comp is not None:
+            t_s = float(time_s)  # type: ignore[arg-type]
+            if not math.isfinite(t_s):
+                raise InputError("time_s", f"must be finite, got {time_s!r}")
+            y, v = comp.predict(t_s, y, v)
+            if not _finite(y, v):
+                comp.reset()
+                y, v = y_meas, v_meas
         lam, s, terms = self._terms(y, v)
         st = terms.state
         eta2_ref = self.reference_speed(st.eta1)
@@ -208,11 +246,17 @@ class PathFollower:
                 w = max(w, out / END_BLEND_M)
         w = 0.0 if w <= 0.0 else (1.0 if w >= 1.0 else w)
         law = self.law
-        tube: LawOutput | None = law.tube(terms, eta2_ref) if w < 1.0 else None
+        eta2_ref_law = eta2_ref
+        if comp is not None and w < 1.0:
+            # integral action as reference offsets: the law's limits and shaping act unchanged
+            b_eta2, b_xi1, b_phi1 = comp.integral_offsets()
+            eta2_ref_law = eta2_ref + b_eta2
+            terms = terms._replace(state=st._replace(xi1=st.xi1 + b_xi1, phi1=st.phi1 + b_phi1))
+        tube: LawOutput | None = law.tube(terms, eta2_ref_law) if w < 1.0 else None
         if tube is None:
             w = 1.0
         # unit tangent and arclength derivatives at lam* (approach law, yaw, jerk feed-forward)
-        tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
+        tan = onpath_derivatives(s[3:6], s[6:9], s[9:12])[0]
         if w > 0.0:
             app = law.approach(r, v, tan, 0.0 if past_end else eta2_ref)
             if tube is None:
@@ -233,23 +277,43 @@ class PathFollower:
             assert tube is not None
             res = tube
         ax, ay, az = res.accel
+        # on-path jerk at eta2_ref (eqs. 25-27: jerk = sigma_sss eta2_ref^3), faded out with the
+        # fallback weight (no on-path motion to anticipate far away): feed-forward of the body
+        # rates and of the inner loop's lag
+        tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
+        k3 = (1.0 - w) * eta2_ref * eta2_ref * eta2_ref
+        jerk = (s_sss[0] * k3, s_sss[1] * k3, s_sss[2] * k3)
+        if comp is not None:
+            # the setpoint that makes the identified vehicle fly res.accel, kept feasible; the
+            # lag's phase is inverted along the path by leading with lag * jerk
+            lag_xy, lag_z = comp.lag[0], comp.lag[2]
+            lead = (ax + lag_xy * jerk[0], ay + lag_xy * jerk[1], az + lag_z * jerk[2])
+            sp = comp.invert(t_s, lead, v)
+            fc = law.thrust_set.clip((sp[0], sp[1], sp[2] + G))
+            ax, ay, az = fc[0], fc[1], fc[2] - G
+            comp.record(t_s, (ax, ay, az))
         f = (ax, ay, az + G)
         thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
         tilt, thrust_sat = law.thrust_set.active(f)
-        # feed-forward: the on-path motion at eta2_ref (eqs. 25-27): jerk = sigma_sss eta2_ref^3,
-        # faded out with the fallback weight (no on-path motion to anticipate far away)
         psi, dpsi = self._yaw.evaluate(st.eta1, tan, s_ss)
         eta2 = st.eta2 if w == 0.0 else (1.0 - w) * st.eta2 + w * (tan[0] * v[0] + tan[1] * v[1] + tan[2] * v[2])
         yaw_rate = dpsi * eta2
-        k3 = (1.0 - w) * eta2_ref * eta2_ref * eta2_ref
-        jerk = (s_sss[0] * k3, s_sss[1] * k3, s_sss[2] * k3)
         axes = attitude_from_thrust(f, psi)
         q = quaternion_from_axes(*axes)
         omega = body_rates(axes, thrust, jerk, yaw_rate)
-        if not _finite(res.accel, q, omega, (thrust, psi, yaw_rate)):  # last line of defence
+        if not _finite((ax, ay, az), q, omega, (thrust, psi, yaw_rate)):  # last line of defence
             raise InputError("state", f"no finite command at position {list(y)}, velocity {list(v)}")
+        if comp is not None:
+            # report the measured state, not the prediction the law acted on
+            lam = float(self._measured_projector.update(y_meas))
+            sm = self._eval(lam)
+            dist = math.sqrt((y_meas[0] - sm[0]) ** 2 + (y_meas[1] - sm[1]) ** 2 + (y_meas[2] - sm[2]) ** 2)
+            st = evaluate_terms(self.path, lam, y_meas, v_meas).state
+            # integrate the measured errors only in the exact tube and while nothing saturates
+            free = w == 0.0 and not (res.tangential or res.transversal or tilt or thrust_sat)
+            comp.integrate(t_s, eta2_ref - st.eta2, st.xi1, st.phi1, free)
         return Command(
-            acceleration=np.array(res.accel),
+            acceleration=np.array((ax, ay, az)),
             thrust=thrust,
             attitude=np.array(q),
             body_rates=np.array(omega),

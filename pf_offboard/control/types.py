@@ -51,6 +51,13 @@ class Gains:
             if getattr(self, name) > 5.0:
                 raise InputError(name, f"must be <= 5, got {getattr(self, name)}")
 
+    @classmethod
+    def from_bandwidth(
+        cls, transversal_hz: float, tangential_hz: float | None = None, *, damping: float = 1.0
+    ) -> Gains:
+        """Both loops from bandwidths (Hz) with one damping ratio (tangential: same as transversal)."""
+        return cls(transversal_hz, damping, transversal_hz if tangential_hz is None else tangential_hz, damping)
+
     @property
     def transversal_kp(self) -> float:
         """1/s^2."""
@@ -151,6 +158,12 @@ class VehicleModel:
     drag_xy_1_s: float = 0.0
     drag_z_1_s: float = 0.0
     rate_time_constant_s: float = 0.0
+
+    @classmethod
+    def typical(cls) -> VehicleModel:
+        """What a config without a ``vehicle:`` section assumes: a typical PX4 / ArduPilot
+        multicopter (lag 0.1 s, delay 0.1 s, unit gain; drag is left to the observer)."""
+        return cls(accel_lag_xy_s=0.1, accel_lag_z_s=0.05, accel_delay_s=0.1, rate_time_constant_s=0.05)
 
     def __post_init__(self) -> None:
         bounds = {

@@ -1,0 +1,210 @@
+"""Inner-loop compensation: delay predictor, drag/gain inversion and a disturbance observer.
+
+The paper assumes the cascade below the path follower is an ideal double integrator. A real
+autopilot is not: PX4 SIH answers an acceleration setpoint after about 0.24 s (delay + lag), with a
+horizontal gain below one and 1 s⁻¹ of linear drag, so a 1.5 Hz loop on top of it oscillates and
+flies 10–15 % slow. This module makes the plant seen by the control law a double integrator
+again, with the identified :class:`~pf_offboard.control.types.VehicleModel`:
+
+``dv/dt = gain ⊙ a_sp(t − H) − drag ⊙ v + d``, ``H = accel_delay_s + accel_lag_s`` (a first-order
+lag is approximated by an equal dead time: the same phase up to the loop's crossover).
+
+Per control step, world frame ENU (m, m/s, m/s²):
+
+1. **Observer** (a linear extended-state observer, poles at ``-observer_rad_s``): estimates ``d``,
+   what the model does not explain — wind, a wrong hover thrust, battery sag, drag the model
+   misses — from the measured velocity and the setpoints actually sent. It sees the clipped
+   setpoint, so saturation cannot wind it up; ``d`` is also bounded by ``max_disturbance_m_s2``.
+2. **Predictor** (Smith): integrates the model over the setpoints already sent to the state at
+   ``t + H`` — the state the next setpoint will act on. The control law runs on it.
+3. **Inversion**: the law's acceleration ``a`` becomes ``a_sp = (a + drag ⊙ v̂ − d̂) / gain``.
+
+With ``d̂ = d`` the loop is the nominal one, so the path stays invariant; the observer adds no
+explicit time dependence (its state is driven by the measurements only). ``reset()`` forgets
+everything (activation, estimator reset, a gap in the telemetry).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from pf_offboard.control.types import VehicleModel
+from pf_offboard.errors import InputError
+
+Vec = tuple[float, float, float]
+_ZERO: Vec = (0.0, 0.0, 0.0)
+
+# A telemetry gap longer than this (s) makes the observer and predictor start over: integrating the
+# model across it would extrapolate commands the vehicle may not have flown.
+MAX_GAP_S = 0.25
+
+
+class InnerLoopCompensator:
+    """Stateful, I/O-free. Call :meth:`predict` with each fresh state sample, then :meth:`invert`
+    with the law's acceleration; :meth:`invert` records the setpoint it returns as sent."""
+
+    def __init__(
+        self,
+        model: VehicleModel,
+        *,
+        observer_rad_s: float = 4.0,
+        max_disturbance_m_s2: float = 4.0,
+        speed_integral_rad_s: float = 1.0,
+        offset_integral_rad_s: float = 1.0,
+        max_speed_offset_m_s: float = 0.3,
+        max_position_offset_m: float = 0.1,
+    ) -> None:
+        if not (math.isfinite(observer_rad_s) and 0.0 <= observer_rad_s <= 50.0):
+            raise InputError("gains.disturbance_observer_rad_s", f"must be in [0, 50], got {observer_rad_s!r}")
+        if not (math.isfinite(max_disturbance_m_s2) and max_disturbance_m_s2 >= 0.0):
+            raise InputError("max_disturbance_m_s2", f"must be >= 0, got {max_disturbance_m_s2!r}")
+        self.model = model
+        self.delay_s = model.accel_delay_s
+        self.lag: Vec = (model.accel_lag_xy_s, model.accel_lag_xy_s, model.accel_lag_z_s)
+        self.horizon_s = model.accel_delay_s + model.accel_lag_xy_s
+        self.horizon_z_s = model.accel_delay_s + model.accel_lag_z_s
+        self.gain: Vec = (model.accel_gain_xy, model.accel_gain_xy, model.accel_gain_z)
+        self.drag: Vec = (model.drag_xy_1_s, model.drag_xy_1_s, model.drag_z_1_s)
+        self.observer_rad_s = float(observer_rad_s)
+        self.max_disturbance_m_s2 = float(max_disturbance_m_s2)
+        self._history_s = max(self.horizon_s, self.horizon_z_s) + MAX_GAP_S
+        for name, value in (("speed_integral_rad_s", speed_integral_rad_s), ("offset_integral_rad_s", offset_integral_rad_s),
+                            ("max_speed_offset_m_s", max_speed_offset_m_s), ("max_position_offset_m", max_position_offset_m)):
+            if not (math.isfinite(value) and 0.0 <= value <= 100.0):
+                raise InputError(f"gains.{name}", f"must be in [0, 100], got {value!r}")
+        # Integral action on what the observer cannot see: a model mismatch that is constant in
+        # path coordinates (a speed bias, a steady offset in a long turn). PI form: the law sees
+        # e + k_i * integral(e), i.e. a reference offset bounded by the max_* values (anti-windup).
+        self.speed_integral_rad_s = float(speed_integral_rad_s)
+        self.offset_integral_rad_s = float(offset_integral_rad_s)
+        self.max_speed_offset_m_s = float(max_speed_offset_m_s)
+        self.max_position_offset_m = float(max_position_offset_m)
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget the observer state and the setpoint history."""
+        self._t: float | None = None
+        self._v_hat: Vec = _ZERO
+        self._a_f: Vec = _ZERO  # the model's lag-filter output (acceleration flown, before drag)
+        self.disturbance: Vec = _ZERO  # d̂, m/s² ENU
+        self._sent: deque[tuple[float, Vec]] = deque()  # (time_s, a_sp ENU) in order
+        self._t_int: float | None = None
+        self.speed_offset_m_s = 0.0  # added to eta2_ref
+        self.xi1_offset_m = 0.0  # added to the law's xi1, phi1
+        self.phi1_offset_m = 0.0
+
+    def integral_offsets(self) -> tuple[float, float, float]:
+        """(eta2_ref offset m/s, xi1 offset m, phi1 offset m) the law adds to its inputs."""
+        return self.speed_offset_m_s, self.xi1_offset_m, self.phi1_offset_m
+
+    def integrate(self, time_s: float, speed_error_m_s: float, xi1_m: float, phi1_m: float, free: bool) -> None:
+        """Advance the integrators with the measured errors (frozen while ``free`` is False:
+        outside the exact tube or while a limit shapes the command — anti-windup)."""
+        t_prev, self._t_int = self._t_int, time_s
+        if t_prev is None or not free or not (0.0 < time_s - t_prev <= MAX_GAP_S):
+            return
+        dt = time_s - t_prev
+        ks, kx = self.speed_integral_rad_s * dt, self.offset_integral_rad_s * dt
+        vmax, pmax = self.max_speed_offset_m_s, self.max_position_offset_m
+        self.speed_offset_m_s = min(vmax, max(-vmax, self.speed_offset_m_s + ks * speed_error_m_s))
+        self.xi1_offset_m = min(pmax, max(-pmax, self.xi1_offset_m + kx * xi1_m))
+        self.phi1_offset_m = min(pmax, max(-pmax, self.phi1_offset_m + kx * phi1_m))
+
+    def _pieces(self, t0: float, t1: float) -> list[tuple[float, Vec]]:
+        """Setpoints acting on the vehicle over (t0, t1] as (duration_s, a_sp ENU) pieces: the one
+        sent at s acts from s + delay on (zero-order hold; before any setpoint: hover, 0)."""
+        delay = self.delay_s
+        cur: Vec = _ZERO
+        out: list[tuple[float, Vec]] = []
+        tau = t0
+        for ts, a in self._sent:
+            t_on = ts + delay
+            if t_on <= t0 + 1e-9:
+                cur = a
+                continue
+            if t_on >= t1:
+                break
+            out.append((t_on - tau, cur))
+            tau, cur = t_on, a
+        out.append((t1 - tau, cur))
+        return out
+
+    def _advance(self, a_f: list[float], v: list[float], p: list[float], pieces: list[tuple[float, Vec]]) -> None:
+        """Integrate the model (lag filter a_f, velocity, position; in place) over the pieces."""
+        for h, u_sp in pieces:
+            if h <= 0.0:
+                continue
+            for i in range(3):
+                u = self.gain[i] * u_sp[i]
+                lag = self.lag[i]
+                if lag > 0.0:
+                    alpha = math.exp(-h / lag)
+                    mean_a = u + (a_f[i] - u) * (lag / h) * (1.0 - alpha)
+                    a_f[i] = u + (a_f[i] - u) * alpha
+                else:
+                    mean_a = a_f[i] = u
+                acc = mean_a - self.drag[i] * v[i] + self.disturbance[i]
+                p[i] += h * (v[i] + 0.5 * h * acc)
+                v[i] += h * acc
+
+    # ------------------------------------------------------------------ the three steps
+    def predict(self, time_s: float, position: Vec, velocity: Vec) -> tuple[Vec, Vec]:
+        """Update the observer with a measured state; return (position, velocity) at ``t + H``."""
+        t_prev = self._t
+        if t_prev is not None and time_s <= t_prev:
+            return self._extrapolate(time_s, position, velocity)  # not newer: no observer update
+        if t_prev is None or time_s - t_prev > MAX_GAP_S:
+            self.reset()
+            self._t = time_s
+            self._v_hat = velocity
+            return self._extrapolate(time_s, position, velocity)
+        dt = time_s - t_prev
+        a_f, vh, ph = list(self._a_f), list(self._v_hat), [0.0, 0.0, 0.0]
+        self._advance(a_f, vh, ph, self._pieces(t_prev, time_s))
+        w = self.observer_rad_s
+        l1, l2 = 2.0 * w * dt, w * w * dt
+        dmax = self.max_disturbance_m_s2
+        dh = list(self.disturbance)
+        for i in range(3):
+            e = velocity[i] - vh[i]
+            vh[i] += l1 * e
+            d = dh[i] + l2 * e
+            dh[i] = dmax if d > dmax else (-dmax if d < -dmax else d)
+        self._a_f = (a_f[0], a_f[1], a_f[2])
+        self._v_hat = (vh[0], vh[1], vh[2])
+        self.disturbance = (dh[0], dh[1], dh[2])
+        self._t = time_s
+        return self._extrapolate(time_s, position, velocity)
+
+    def _extrapolate(self, time_s: float, position: Vec, velocity: Vec) -> tuple[Vec, Vec]:
+        """Integrate the model from the measurement over the setpoints already sent (Smith) to
+        ``t + delay``, when the setpoint computed now starts to act. The lag is not predicted
+        past that: it stays part of the plant the law's gains must respect (predicting it too,
+        with the last setpoint held, over-predicted and excited oscillations in simulation)."""
+        if self.delay_s <= 0.0:
+            return position, velocity
+        a_f, v, p = list(self._a_f), list(velocity), list(position)
+        self._advance(a_f, v, p, self._pieces(time_s, time_s + self.delay_s))
+        return (p[0], p[1], p[2]), (v[0], v[1], v[2])
+
+    def invert(self, time_s: float, accel: Vec, velocity_pred: Vec) -> Vec:
+        """Setpoint that makes the modelled vehicle accelerate at ``accel`` (ENU, gravity excluded)
+        at the predicted velocity. Not recorded: call :meth:`record` with what is really sent."""
+        d = self.disturbance
+        return (
+            (accel[0] + self.drag[0] * velocity_pred[0] - d[0]) / self.gain[0],
+            (accel[1] + self.drag[1] * velocity_pred[1] - d[1]) / self.gain[1],
+            (accel[2] + self.drag[2] * velocity_pred[2] - d[2]) / self.gain[2],
+        )
+
+    def record(self, time_s: float, setpoint: Vec) -> None:
+        """Remember the setpoint sent at ``time_s`` (ENU acceleration, gravity excluded)."""
+        sent = self._sent
+        if sent and time_s < sent[-1][0]:
+            return  # out of order: keep the history monotonic
+        sent.append((time_s, setpoint))
+        horizon = time_s - self._history_s
+        while len(sent) > 1 and sent[1][0] <= horizon:
+            sent.popleft()
