@@ -22,6 +22,7 @@ from collections import deque
 
 import numpy as np
 
+from .estimator import EstimatorError
 from .params import GRAVITY_M_S2, VehicleParams
 from .types import (
     AccelerationSetpoint,
@@ -101,6 +102,14 @@ class Simulator:
         self.params = params
         # Independent streams: how often measure() is called must not change the trajectory.
         self._rng_wind, self._rng_sensors = rng.spawn(2)
+        # The estimator's stream is a third child, drawn only when it is on: presets without
+        # estimator noise keep their trajectories bit for bit.
+        self._est: EstimatorError | None = (
+            EstimatorError(params.estimator, rng.spawn(1)[0]) if params.estimator.enabled else None
+        )
+        # Setpoint latency: setpoints take effect setpoint_latency_s after they are given.
+        self._latency_ticks = int(round(params.setpoint_latency_s * PHYSICS_RATE_HZ))
+        self._pending_sp: deque[tuple[int, Setpoint]] = deque()
         self._init_constants(params)
         self._ticks = 0
         self._t_req_s = 0.0
@@ -163,11 +172,31 @@ class Simulator:
         dt_s = _num("Simulator.step", "dt_s", dt_s, 0.0, 3600.0)
         if not isinstance(setpoint, _SETPOINT_TYPES):
             raise ValueError(f"Simulator.step.setpoint: unsupported setpoint {type(setpoint).__name__}")
-        self._select(setpoint)
         self._t_req_s += dt_s
-        n = int(round(self._t_req_s * PHYSICS_RATE_HZ)) - self._ticks
-        if n > 0:
-            self._run(n)
+        target = int(round(self._t_req_s * PHYSICS_RATE_HZ))
+        if self._latency_ticks == 0:
+            self._select(setpoint)
+            if target > self._ticks:
+                self._run(target - self._ticks)
+        else:
+            pending = self._pending_sp
+            pending.append((self._ticks + self._latency_ticks, setpoint))
+            while True:
+                while pending and pending[0][0] <= self._ticks:
+                    self._select(pending.popleft()[1])
+                if self._ticks >= target:
+                    break
+                stop = min(target, pending[0][0]) if pending else target
+                self._run(stop - self._ticks)
+        if self._est is not None:
+            self._est.advance_to(self._ticks * PHYSICS_DT_S)
+
+    def estimate_error(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """(position m, velocity m/s) error of the reported state, world NED: reported − true.
+        Zero unless ``params.estimator`` is on (see :mod:`sitl_mock.dynamics.estimator`)."""
+        if self._est is None:
+            return ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        return (self._est.position_error_ned_m, self._est.velocity_error_ned_m_s)
 
     def state(self) -> VehicleState:
         """The current true state."""
@@ -217,6 +246,11 @@ class Simulator:
         def noisy(a: np.ndarray, std: float) -> np.ndarray:
             return _ro(a + rng.normal(0.0, std, a.shape)) if std > 0.0 else a
 
+        position, velocity = base.position_ned_m, base.velocity_ned_m_s
+        if self._est is not None:  # the estimator's error (current, not delayed: it is slow)
+            ep, ev = self.estimate_error()
+            position, velocity = _ro(position + ep), _ro(velocity + ev)
+
         q = base.q_ned_frd
         if nz.attitude_std_rad > 0.0:
             e = rng.normal(0.0, nz.attitude_std_rad, 3)
@@ -225,8 +259,8 @@ class Simulator:
             q = _ro(qn / np.linalg.norm(qn))
         return VehicleState(
             time_s=base.time_s,
-            position_ned_m=noisy(base.position_ned_m, nz.position_std_m),
-            velocity_ned_m_s=noisy(base.velocity_ned_m_s, nz.velocity_std_m_s),
+            position_ned_m=noisy(position, nz.position_std_m),
+            velocity_ned_m_s=noisy(velocity, nz.velocity_std_m_s),
             accel_ned_m_s2=noisy(base.accel_ned_m_s2, nz.accel_std_m_s2),
             q_ned_frd=q,
             rates_frd_rad_s=noisy(base.rates_frd_rad_s, nz.rates_std_rad_s),
