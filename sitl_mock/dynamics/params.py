@@ -117,6 +117,12 @@ class VehicleParams:
     ground_friction: float  # Coulomb friction coefficient (dimensionless)
     # Error of the reported (estimated) position/velocity; default off: telemetry is the truth.
     estimator: EstimatorNoise = field(default_factory=EstimatorNoise)
+    # Body-rate controller rate (Hz; divides the 1 kHz physics rate). Below 1 kHz the motor
+    # commands are held between rate-loop ticks (PX4 on SIH runs its loops at 250 Hz).
+    rate_loop_hz: float = 1000.0
+    # Delay from the rate loop's computation to the motors (gyro filtering, sample and transport
+    # delays of a real autopilot), s; quantised to rate-loop ticks. 0: none.
+    rate_loop_delay_s: float = 0.0
     # Time from a setpoint being given (Simulator.step / a MAVLink message) to its effect on the
     # controllers, s (link + uORB + position-controller scheduling). Quantised to 1 ms.
     setpoint_latency_s: float = 0.0
@@ -150,8 +156,12 @@ class VehicleParams:
             raise ValueError(f"VehicleParams.tilt_max_rad: must be < pi/2, got {self.tilt_max_rad!r}")
         if self.drag_1_s < 0.0 or self.ground_friction < 0.0 or self.thrust_lead < 0.0:
             raise ValueError("VehicleParams.drag_1_s/ground_friction/thrust_lead: must be >= 0")
+        if not 0.0 <= self.rate_loop_delay_s <= 0.1:
+            raise ValueError(f"VehicleParams.rate_loop_delay_s: must be in [0, 0.1], got {self.rate_loop_delay_s!r}")
         if not 0.0 <= self.setpoint_latency_s <= 1.0:
             raise ValueError(f"VehicleParams.setpoint_latency_s: must be in [0, 1], got {self.setpoint_latency_s!r}")
+        if not (0.0 < self.rate_loop_hz <= 1000.0) or 1000.0 % self.rate_loop_hz > 1e-9:
+            raise ValueError(f"VehicleParams.rate_loop_hz: must divide 1000 (physics rate), got {self.rate_loop_hz!r}")
         if 1000.0 % self.attitude_loop_hz > 1e-9 or self.attitude_loop_hz > 1000.0:
             raise ValueError(
                 f"VehicleParams.attitude_loop_hz: must divide 1000 (physics rate), got {self.attitude_loop_hz!r}"
@@ -336,6 +346,8 @@ def _px4_sih() -> VehicleParams:
         airmode=False,
         thrust_lead=0.0,
         attitude_loop_hz=250.0,  # SIH runs PX4's loops at 250 Hz in lockstep
+        rate_loop_hz=250.0,  # ... the rate loop too: motor commands held for 4 ms
+        rate_loop_delay_s=0.004,  # SIH reads the actuator outputs at its next step
         tilt_max_rad=math.radians(45.0),  # MPC_TILTMAX_AIR
         accel_decouple=True,  # MPC_ACC_DECOUPLE = 1
         thrust_min_norm=0.12,  # MPC_THR_MIN

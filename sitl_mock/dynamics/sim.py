@@ -126,6 +126,14 @@ class Simulator:
         self._rs = (0.0, 0.0, 0.0, t0)
         self._motors_on = spawn.motors_at_hover
         self._countdown = 0
+        self._rate_countdown = 0  # rate-loop ticks until the next motor-command update
+        self._motor_cmd = (t0, t0, t0, t0)  # motor commands held between rate-loop ticks, N
+        # Rate-loop output delay (sensing + actuator transport, in rate-loop ticks): a queue of the
+        # commands not yet applied, pre-filled with the spawn's; None when there is no delay.
+        n_delay = int(round(params.rate_loop_delay_s * params.rate_loop_hz))
+        self._motor_delay_q: deque[tuple[float, float, float, float]] | None = (
+            deque([(t0, t0, t0, t0)] * n_delay) if n_delay > 0 else None
+        )
         self._q_sp = q
         self._thrust_sp = params.hover_thrust if spawn.motors_at_hover else 0.0
         self._setpoint: Setpoint = AccelerationSetpoint((0.0, 0.0, 0.0)) if spawn.motors_at_hover else MotorsOff()
@@ -304,6 +312,7 @@ class Simulator:
         self._a_arm = pr.arm_length_m / math.sqrt(2.0)
         self._alpha_motor = 1.0 - math.exp(-dt / pr.motor_time_constant_s)
         self._att_div = int(round(PHYSICS_RATE_HZ / pr.attitude_loop_hz))
+        self._rate_div = int(round(PHYSICS_RATE_HZ / pr.rate_loop_hz))
         self._att_dt = self._att_div * dt
         rp, yw = pr.roll_pitch, pr.yaw
         # PX4 yaw weight: roll/pitch first. PX4 scales the yaw error by yaw_w and the yaw gain by
@@ -603,6 +612,11 @@ class Simulator:
         tqz = km * (t0 + t1 - t2 - t3)
         ticks = self._ticks
         ax = ay = az = 0.0
+        rdiv = self._rate_div
+        rdt = rdiv * dt
+        rcount = self._rate_countdown if on else 0
+        m0, m1, m2, m3 = self._motor_cmd
+        delay_q = self._motor_delay_q
         for _ in range(n):
             if countdown <= 0:
                 countdown = div
@@ -622,88 +636,100 @@ class Simulator:
             countdown -= 1
             ticks += 1
             if on:
-                # Body-rate controller (P + I + motor-torque feedback) and mixer. Clamps are
-                # written out: a function call here costs more than the whole comparison.
-                ex, ey, ez = rsx - wx, rsy - wy, rsz - wz
-                ix += ex * dt
-                iy += ey * dt
-                iz += ez * dt
-                if ix > ilx:
-                    ix = ilx
-                elif ix < -ilx:
-                    ix = -ilx
-                if iy > ily:
-                    iy = ily
-                elif iy < -ily:
-                    iy = -ily
-                if iz > ilz:
-                    iz = ilz
-                elif iz < -ilz:
-                    iz = -ilz
-                r = kpx * ex + kix * ix
-                if r > avail:
-                    r = avail
-                elif r < -avail:
-                    r = -avail
-                p = kpy * ey + kiy * iy
-                if p > avail:
-                    p = avail
-                elif p < -avail:
-                    p = -avail
-                yv = kpz * ez + kiz * iz
-                if yv > avail:
-                    yv = avail
-                elif yv < -avail:
-                    yv = -avail
-                r = ldx * r - kdx * tqx
-                p = ldy * p - kdy * tqy
-                yv = ldz * yv - kdz * tqz
-                rp0 = p - r
-                rp2 = r + p
-                a0 = rp0 if rp0 >= 0.0 else -rp0
-                a2 = rp2 if rp2 >= 0.0 else -rp2
-                mm = a0 if a0 > a2 else a2
-                if mm > half:  # roll/pitch alone saturate: scale them, keep their ratio
-                    s = half / mm
-                    rp0 *= s
-                    rp2 *= s
-                    a0 *= s
-                    a2 *= s
-                    mm = half
-                # Roll/pitch first: the collective may drop to make room at the top; at the bottom
-                # it rises (airmode) or roll/pitch shrink (PX4 default, airmode off).
-                # Collective, led against the motors' present mean thrust like the torques.
-                c = cc + lead_c * (cc - 0.25 * (t0 + t1 + t2 + t3)) if lead_c > 0.0 else cc
-                if c > tmax - mm:
-                    c = tmax - mm
-                if c < tmin + mm and airmode:
-                    c = tmin + mm
-                elif c < tmin + mm:
-                    if c <= tmin:
-                        c = tmin
-                        rp0 = rp2 = a0 = a2 = mm = 0.0
-                    else:
-                        s = (c - tmin) / mm
+                if rcount <= 0:
+                    # Rate-loop tick (every tick at 1 kHz; held between ticks when slower).
+                    rcount = rdiv
+                    # Body-rate controller (P + I + motor-torque feedback) and mixer. Clamps are
+                    # written out: a function call here costs more than the whole comparison.
+                    ex, ey, ez = rsx - wx, rsy - wy, rsz - wz
+                    ix += ex * rdt
+                    iy += ey * rdt
+                    iz += ez * rdt
+                    if ix > ilx:
+                        ix = ilx
+                    elif ix < -ilx:
+                        ix = -ilx
+                    if iy > ily:
+                        iy = ily
+                    elif iy < -ily:
+                        iy = -ily
+                    if iz > ilz:
+                        iz = ilz
+                    elif iz < -ilz:
+                        iz = -ilz
+                    r = kpx * ex + kix * ix
+                    if r > avail:
+                        r = avail
+                    elif r < -avail:
+                        r = -avail
+                    p = kpy * ey + kiy * iy
+                    if p > avail:
+                        p = avail
+                    elif p < -avail:
+                        p = -avail
+                    yv = kpz * ez + kiz * iz
+                    if yv > avail:
+                        yv = avail
+                    elif yv < -avail:
+                        yv = -avail
+                    r = ldx * r - kdx * tqx
+                    p = ldy * p - kdy * tqy
+                    yv = ldz * yv - kdz * tqz
+                    rp0 = p - r
+                    rp2 = r + p
+                    a0 = rp0 if rp0 >= 0.0 else -rp0
+                    a2 = rp2 if rp2 >= 0.0 else -rp2
+                    mm = a0 if a0 > a2 else a2
+                    if mm > half:  # roll/pitch alone saturate: scale them, keep their ratio
+                        s = half / mm
                         rp0 *= s
                         rp2 *= s
                         a0 *= s
                         a2 *= s
-                yhi = tmax - c - a0
-                lim = c - a2 - tmin
-                if lim < yhi:
-                    yhi = lim
-                ylo = tmin - c + a0
-                lim = c + a2 - tmax
-                if lim > ylo:
-                    ylo = lim
-                if yv > yhi:
-                    yv = yhi
-                elif yv < ylo:
-                    yv = ylo
-                t0 += am * (c + rp0 + yv - t0)
-                t1 += am * (c - rp0 + yv - t1)
-                t2 += am * (c + rp2 - yv - t2)
-                t3 += am * (c - rp2 - yv - t3)
+                        mm = half
+                    # Roll/pitch first: the collective may drop to make room at the top; at the bottom
+                    # it rises (airmode) or roll/pitch shrink (PX4 default, airmode off).
+                    # Collective, led against the motors' present mean thrust like the torques.
+                    c = cc + lead_c * (cc - 0.25 * (t0 + t1 + t2 + t3)) if lead_c > 0.0 else cc
+                    if c > tmax - mm:
+                        c = tmax - mm
+                    if c < tmin + mm and airmode:
+                        c = tmin + mm
+                    elif c < tmin + mm:
+                        if c <= tmin:
+                            c = tmin
+                            rp0 = rp2 = a0 = a2 = mm = 0.0
+                        else:
+                            s = (c - tmin) / mm
+                            rp0 *= s
+                            rp2 *= s
+                            a0 *= s
+                            a2 *= s
+                    yhi = tmax - c - a0
+                    lim = c - a2 - tmin
+                    if lim < yhi:
+                        yhi = lim
+                    ylo = tmin - c + a0
+                    lim = c + a2 - tmax
+                    if lim > ylo:
+                        ylo = lim
+                    if yv > yhi:
+                        yv = yhi
+                    elif yv < ylo:
+                        yv = ylo
+                    if delay_q is None:
+                        m0 = c + rp0 + yv
+                        m1 = c - rp0 + yv
+                        m2 = c + rp2 - yv
+                        m3 = c - rp2 - yv
+                    else:  # the motors get the command computed rate_loop_delay ticks ago
+                        delay_q.append((c + rp0 + yv, c - rp0 + yv, c + rp2 - yv, c - rp2 - yv))
+                        m0, m1, m2, m3 = delay_q.popleft()
+                rcount -= 1
+                t0 += am * (m0 - t0)
+                t1 += am * (m1 - t1)
+                t2 += am * (m2 - t2)
+                t3 += am * (m3 - t3)
             else:
                 t0 -= am * t0
                 t1 -= am * t1
@@ -790,6 +816,8 @@ class Simulator:
         self._accel = (ax, ay, az)
         self._ticks = ticks
         self._countdown = countdown
+        self._rate_countdown = rcount
+        self._motor_cmd = (m0, m1, m2, m3)
         self._rs = (rsx, rsy, rsz, cc)
         self._landed = landed
         self._crashed = crashed

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sitl_mock.dynamics import AccelerationSetpoint, PositionSetpoint, Simulator, Spawn, preset
+from sitl_mock.dynamics import AccelerationSetpoint, PositionSetpoint, RateSetpoint, Simulator, Spawn, preset
 from sitl_mock.dynamics.estimator import EstimatorError, EstimatorNoise
 
 
@@ -101,3 +101,28 @@ def test_setpoint_latency_is_a_pure_delay() -> None:
 def test_bad_estimator_noise_is_named(field: str) -> None:
     with pytest.raises(ValueError, match=field):
         EstimatorNoise(**{field: -1.0})
+
+
+def test_rate_loop_rate_and_output_delay() -> None:
+    """px4-sih: rate loop at 250 Hz (commands held 4 ms) and its output applied one tick late."""
+    params = preset("px4-sih").with_(estimator=EstimatorNoise(), setpoint_latency_s=0.0)
+    assert (params.rate_loop_hz, params.rate_loop_delay_s) == (250.0, 0.004)
+    step = RateSetpoint((1.0, 0.0, 0.0), params.true_hover_thrust)
+
+    def motors(p: object) -> np.ndarray:
+        sim = Simulator(p, np.random.default_rng(0), Spawn.hover((0, 0, -5)))  # type: ignore[arg-type]
+        return np.array([sim.step(0.001, step).motor_thrust_n for _ in range(12)])
+
+    hover = params.weight_n / 4.0
+    delayed = motors(params)
+    np.testing.assert_allclose(delayed[:4], hover, rtol=1e-12)  # ticks 1-4: the old command
+    assert abs(delayed[4, 0] - hover) > 1e-4  # tick 5: the first rate-loop command arrives
+    prompt = motors(params.with_(rate_loop_delay_s=0.0))
+    assert abs(prompt[0, 0] - hover) > 1e-4
+    # Held between rate ticks: the motors move towards one command for 4 ticks (first-order lag).
+    gap = prompt[:4, 0] - prompt[0, 0]
+    assert np.all(np.diff(np.abs(gap)) > 0)
+    with pytest.raises(ValueError, match="rate_loop_hz"):
+        params.with_(rate_loop_hz=300.0)
+    with pytest.raises(ValueError, match="rate_loop_delay_s"):
+        params.with_(rate_loop_delay_s=-0.001)

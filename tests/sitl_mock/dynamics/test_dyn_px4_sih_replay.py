@@ -17,7 +17,7 @@ Metrics, pooled over a flight's windows:
   flight): the lag maximising the correlation, and the least-squares gain at that lag.
 
 Tolerances. Measured (mock vs real), velocity NRMSE: acceleration flight 0.19, attitude 0.31,
-rates 0.33; the ``fast`` preset (an ideal inner loop) scores 0.82–1.95 on the same windows. The
+rates 0.32; the ``fast`` preset (an ideal inner loop) scores 0.82–1.95 on the same windows. The
 residual is not only model error: the recorded velocity is EKF2's estimate (~2 cm/s noise plus
 wander), the window's initial motor thrust is unknown (hover assumed), and the setpoint timing is
 known only to the telemetry frame that preceded it (the log's wall-clock stamps jitter ±0.2 s).
