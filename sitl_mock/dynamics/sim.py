@@ -99,7 +99,7 @@ class Simulator:
         spawn = spawn if spawn is not None else Spawn.ground()
         if not isinstance(spawn, Spawn):
             raise ValueError(f"Simulator.spawn: expected a Spawn, got {type(spawn).__name__}")
-        self.params = params
+        self._params = params
         # Independent streams: how often measure() is called must not change the trajectory.
         self._rng_wind, self._rng_sensors = rng.spawn(2)
         # The estimator's stream is a third child, drawn only when it is on: presets without
@@ -159,6 +159,20 @@ class Simulator:
     # ------------------------------------------------------------------------------------------
     # Public API
     # ------------------------------------------------------------------------------------------
+
+    @property
+    def params(self) -> VehicleParams:
+        """The vehicle's parameters. Assigning new ones (e.g. the autopilot's hover thrust after a
+        PARAM_SET) takes effect at the next tick; the estimator and the setpoint latency keep the
+        values they were built with."""
+        return self._params
+
+    @params.setter
+    def params(self, params: VehicleParams) -> None:
+        if not isinstance(params, VehicleParams):
+            raise ValueError(f"Simulator.params: expected VehicleParams, got {type(params).__name__}")
+        self._params = params
+        self._init_constants(params)
 
     @property
     def time_s(self) -> float:

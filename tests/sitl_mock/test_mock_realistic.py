@@ -104,3 +104,20 @@ def test_telemetry_reports_the_estimate_not_the_truth() -> None:
         ideal.step(0.004)
     m = local_position_ned(ideal)
     np.testing.assert_allclose([m.x, m.y, m.z], ideal.truth.position_ned_m, atol=1e-6)
+
+
+def test_hover_thrust_param_set_reaches_the_acceleration_mapping() -> None:
+    """PARAM_SET MPC_THR_HOVER changes the thrust the acceleration mapping commands (a mistuned
+    hover thrust makes the vehicle climb on a zero-acceleration setpoint)."""
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from sitl_mock.dynamics import AccelerationSetpoint
+
+    ap = _hover("fast")
+    true_hover = ap.sim.params.true_hover_thrust
+    ap.handle(mavlink.MAVLink_param_set_message(1, 1, b"MPC_THR_HOVER", 0.35, mavlink.MAV_PARAM_TYPE_REAL32), 0)
+    assert ap.sim.params.hover_thrust == pytest.approx(0.35)
+    for _ in range(50):
+        state = ap.sim.step(0.004, AccelerationSetpoint((0.0, 0.0, 0.0), yaw_rad=0.0))
+    assert state.thrust_norm_sp == pytest.approx(0.35, rel=1e-6)
+    assert state.accel_ned_m_s2[2] < -9.80665 * (0.35 / true_hover - 1.0) * 0.5  # climbing
