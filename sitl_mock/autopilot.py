@@ -106,7 +106,7 @@ class Autopilot:
             dyn_spawn = Spawn.thrown(spawn.position_ned_m, spawn.velocity_ned_m_s)
         else:
             dyn_spawn = Spawn.ground(spawn.position_ned_m)
-        self.sim = Simulator(vehicle, rng_dyn, dyn_spawn)
+        self.sim = Simulator(vehicle, rng_dyn, dyn_spawn, wind=config.wind())
         self.truth: VehicleState = self.sim.state()
         self._position_sp_cache: tuple[object, PositionSetpoint | None] = (None, None)
         self._estimate_cache: tuple[object, int, tuple[np.ndarray, np.ndarray, float]] = (None, -1, (np.zeros(3), np.zeros(3), 0.0))
@@ -155,7 +155,13 @@ class Autopilot:
     # ------------------------------------------------------------------------------------------
     @property
     def est_position_ned_m(self) -> np.ndarray:
-        return self.truth.position_ned_m + self.est_offset_ned_m
+        """Reported position: truth + estimator resets + the preset's EKF-like error (NED, m)."""
+        return self._estimate()[0]
+
+    @property
+    def est_velocity_ned_m_s(self) -> np.ndarray:
+        """Reported velocity: truth + the preset's EKF-like error (NED, m/s)."""
+        return self._estimate()[1]
 
     @property
     def ekf_ready(self) -> bool:
@@ -300,7 +306,9 @@ class Autopilot:
         truth = self.truth
         if self._estimate_cache[0] is not truth or self._estimate_cache[1] != self.reset_counter:
             _, _, yaw = euler_from_q(truth.q_ned_frd)
-            estimate = (truth.position_ned_m + self.est_offset_ned_m, np.asarray(truth.velocity_ned_m_s), yaw)
+            err_p, err_v = self.sim.estimate_error()
+            estimate = (truth.position_ned_m + self.est_offset_ned_m + err_p,
+                        np.asarray(truth.velocity_ned_m_s) + err_v, yaw)
             self._estimate_cache = (truth, self.reset_counter, estimate)
         return self._estimate_cache[2]
 
@@ -690,7 +698,8 @@ class Autopilot:
 
     def _position_sp(self, position_est: np.ndarray, yaw: float | None, velocity=(0.0, 0.0, 0.0)) -> PositionSetpoint:
         """The dynamics' position controller, target converted from the estimate to the true frame."""
-        true = position_est - self.est_offset_ned_m
+        # The autopilot flies its estimate onto the target: the truth ends up off by the error.
+        true = position_est - self.est_offset_ned_m - np.asarray(self.sim.estimate_error()[0])
         key = (float(true[0]), float(true[1]), float(true[2]), tuple(velocity), yaw)
         cached_key, cached = self._position_sp_cache
         if cached is None or cached_key != key:  # holds repeat the same target: skip re-validation

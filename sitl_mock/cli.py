@@ -15,6 +15,7 @@ import sys
 from collections.abc import Sequence
 
 from sitl_mock.config import FaultConfig, MockConfig, MockConfigError, SpawnSpec
+from sitl_mock.dynamics import DEFAULT_VEHICLE, PRESET_NAMES
 
 DEFAULT_UDP_LOCAL = 14580
 DEFAULT_UDP_REMOTE = "127.0.0.1:14540"
@@ -59,7 +60,14 @@ def build_parser() -> argparse.ArgumentParser:
         "Loopback only. Frames: NED (x north, y east, z down), metres, seconds.",
     )
     p.add_argument("--profile", choices=("px4", "ardupilot"), default="px4", help="autopilot to imitate (default px4)")
-    p.add_argument("--vehicle", choices=("fast", "px4-default"), default="fast", help="vehicle preset (default fast)")
+    p.add_argument("--vehicle", choices=PRESET_NAMES, default=DEFAULT_VEHICLE,
+                   help=f"vehicle preset (default {DEFAULT_VEHICLE}): fast = paper-like ideal, px4-sih = PX4's SIH quad "
+                   "(calibrated: lag, drag, EKF-like position/velocity error), arducopter = ArduCopter SITL's quad, "
+                   "px4-default = a mid-size PX4-tuned quad")
+    p.add_argument("--wind", metavar="VN,VE[,VD]",
+                   help="constant wind, world NED m/s (air velocity: 3,0 blows toward north at 3 m/s; VD default 0)")
+    p.add_argument("--wind-gusts", metavar="STD[,TAU]",
+                   help="random gusts on top of --wind: std m/s per axis, time constant s (default 2); seeded by --seed")
     link = p.add_argument_group("transports (default: px4 → UDP 14580→14540, ardupilot → TCP 5760)")
     link.add_argument("--udp-local", type=int, metavar="PORT", help="bind UDP on 127.0.0.1:PORT (0 = ephemeral)")
     link.add_argument("--udp-remote", metavar="HOST:PORT",
@@ -159,6 +167,24 @@ def config_from_args(args: argparse.Namespace) -> MockConfig:
         from dataclasses import replace
 
         faults = replace(faults, **changes)  # type: ignore[arg-type]
+    wind: dict[str, object] = {}
+    if args.wind is not None:
+        values = _floats(args.wind, None, "--wind")
+        if len(values) not in (2, 3):
+            raise MockConfigError("--wind", f"expected VN,VE or VN,VE,VD (NED m/s), got {args.wind!r}")
+        wind["wind_ned_m_s"] = (values + (0.0,))[:3]
+    if args.wind_gusts is not None:
+        values = _floats(args.wind_gusts, None, "--wind-gusts")
+        if len(values) not in (1, 2):
+            raise MockConfigError("--wind-gusts", f"expected STD or STD,TAU, got {args.wind_gusts!r}")
+        wind["wind_gust_std_m_s"] = values[0]
+        if len(values) == 2:
+            wind["wind_gust_time_constant_s"] = values[1]
+    try:
+        MockConfig(**wind).validate()  # type: ignore[arg-type]
+    except MockConfigError as exc:  # name the flag, not the field
+        flag = "--wind" if exc.field == "wind_ned_m_s" else "--wind-gusts"
+        raise MockConfigError(flag, exc.reason) from None
     config = MockConfig(
         profile=args.profile,
         vehicle=args.vehicle,
@@ -174,6 +200,7 @@ def config_from_args(args: argparse.Namespace) -> MockConfig:
         faults=faults,
         duration_s=args.duration,
         truth_log=args.truth_log,
+        **wind,  # type: ignore[arg-type]
     )
     config.validate()
     return config
@@ -184,6 +211,10 @@ def config_to_args(config: MockConfig) -> list[str]:
     c, f = config, config.faults
     args = ["--profile", c.profile, "--vehicle", c.vehicle, "--seed", str(c.seed),
             "--ekf-delay", repr(c.ekf_ready_delay_s)]
+    if any(v != 0.0 for v in c.wind_ned_m_s):
+        args += ["--wind", ",".join(repr(float(v)) for v in c.wind_ned_m_s)]
+    if c.wind_gust_std_m_s > 0.0:
+        args += ["--wind-gusts", f"{c.wind_gust_std_m_s!r},{c.wind_gust_time_constant_s!r}"]
     if c.udp_local_port is None:
         args.append("--no-udp")
     else:

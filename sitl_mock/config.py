@@ -11,7 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sitl_mock.dynamics import DEFAULT_VEHICLE, PRESET_NAMES, Wind
 from sitl_mock.profiles import PROFILES
+
+MAX_WIND_M_S = 20.0  # beyond what a small multicopter flies in (and the tilt limits allow)
 
 
 class MockConfigError(ValueError):
@@ -127,7 +130,7 @@ class MockConfig:
     """
 
     profile: str = "px4"
-    vehicle: str = "fast"
+    vehicle: str = DEFAULT_VEHICLE  # a sitl_mock.dynamics preset name
     spawn: SpawnSpec = SpawnSpec()
     seed: int = 0
     udp_local_port: int | None = 14580
@@ -147,10 +150,27 @@ class MockConfig:
     duration_s: float | None = None  # stop after this much simulated time
     truth_log: str | None = None  # CSV of the true vehicle state, one row per autopilot step
     scale_timeouts_with_speed: bool | None = None  # None: like the autopilot (PX4 yes, AP no)
+    # Wind, world NED (air velocity, m/s): a constant mean plus gusts (first-order Gauss–Markov
+    # turbulence per axis, std and time constant) drawn from the simulation's own Generator.
+    wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    wind_gust_std_m_s: float = 0.0
+    wind_gust_time_constant_s: float = 2.0
 
     def validate(self) -> None:
         if self.profile not in PROFILES:
             raise MockConfigError("profile", f"must be one of {sorted(PROFILES)}, got {self.profile!r}")
+        if self.vehicle not in PRESET_NAMES:
+            raise MockConfigError("vehicle", f"must be one of {', '.join(PRESET_NAMES)}, got {self.vehicle!r}")
+        wind = tuple(self.wind_ned_m_s)
+        if len(wind) != 3 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in wind):
+            raise MockConfigError("wind_ned_m_s", f"expected 3 finite numbers (NED m/s), got {self.wind_ned_m_s!r}")
+        if math.sqrt(sum(v * v for v in wind)) > MAX_WIND_M_S:
+            raise MockConfigError("wind_ned_m_s", f"wind speed must be <= {MAX_WIND_M_S:g} m/s, got {wind}")
+        if not (math.isfinite(self.wind_gust_std_m_s) and 0.0 <= self.wind_gust_std_m_s <= MAX_WIND_M_S / 2):
+            raise MockConfigError("wind_gust_std_m_s", f"must be in [0, {MAX_WIND_M_S / 2:g}] m/s, got {self.wind_gust_std_m_s}")
+        if not (math.isfinite(self.wind_gust_time_constant_s) and 0.05 <= self.wind_gust_time_constant_s <= 600.0):
+            raise MockConfigError("wind_gust_time_constant_s",
+                                  f"must be in [0.05, 600] s, got {self.wind_gust_time_constant_s}")
         if not (math.isfinite(self.speed) and self.speed > 0):
             raise MockConfigError("speed", f"must be > 0, got {self.speed}")
         for name in ("lockstep_dt_s", "physics_dt_s", "step_dt_s"):
@@ -182,6 +202,11 @@ class MockConfig:
             raise MockConfigError("home", f"need finite lat in [-90, 90], lon in [-180, 180], alt; got "
                                   f"{(self.home_lat_deg, self.home_lon_deg, self.home_alt_m)}")
         self.faults.validate()
+
+    def wind(self) -> Wind:
+        """The dynamics' wind model for this configuration."""
+        return Wind(tuple(map(float, self.wind_ned_m_s)), turbulence_std_m_s=self.wind_gust_std_m_s,  # type: ignore[arg-type]
+                    turbulence_time_constant_s=self.wind_gust_time_constant_s)
 
     def rng(self) -> np.random.Generator:
         return np.random.default_rng(self.seed)

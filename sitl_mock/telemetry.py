@@ -136,7 +136,7 @@ def attitude_quaternion(ap: Autopilot) -> mavlink.MAVLink_message:
 
 def local_position_ned(ap: Autopilot) -> mavlink.MAVLink_message:
     x, y, z = (float(v) for v in ap.est_position_ned_m)
-    vx, vy, vz = (float(v) for v in ap.truth.velocity_ned_m_s)
+    vx, vy, vz = (float(v) for v in ap.est_velocity_ned_m_s)
     return mavlink.MAVLink_local_position_ned_message(_time_boot_ms(ap), x, y, z, vx, vy, vz)
 
 
@@ -145,7 +145,7 @@ def odometry(ap: Autopilot) -> mavlink.MAVLink_message:
     so frame_id = child_frame_id = LOCAL_NED; rates are body FRD."""
     s = ap.truth
     x, y, z = (float(v) for v in ap.est_position_ned_m)
-    vx, vy, vz = (float(v) for v in s.velocity_ned_m_s)
+    vx, vy, vz = (float(v) for v in ap.est_velocity_ned_m_s)
     p, qr, r = (float(v) for v in s.rates_frd_rad_s)
     return mavlink.MAVLink_odometry_message(
         _time_usec(ap), mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED,
@@ -157,7 +157,7 @@ def odometry(ap: Autopilot) -> mavlink.MAVLink_message:
 def global_position_int(ap: Autopilot) -> mavlink.MAVLink_message:
     pos = ap.est_position_ned_m
     lat, lon, alt = ned_to_global(ap, pos)
-    vx, vy, vz = (float(v) for v in ap.truth.velocity_ned_m_s)
+    vx, vy, vz = (float(v) for v in ap.est_velocity_ned_m_s)
     _, _, yaw = euler_from_q(ap.truth.q_ned_frd)
     hdg = int(round(math.degrees(yaw) % 360.0 * 100.0)) % 36000
     return mavlink.MAVLink_global_position_int_message(
@@ -191,7 +191,7 @@ def altitude(ap: Autopilot) -> mavlink.MAVLink_message:
 
 
 def vfr_hud(ap: Autopilot) -> mavlink.MAVLink_message:
-    v = ap.truth.velocity_ned_m_s
+    v = ap.est_velocity_ned_m_s
     _, _, yaw = euler_from_q(ap.truth.q_ned_frd)
     ground = math.hypot(float(v[0]), float(v[1]))
     return mavlink.MAVLink_vfr_hud_message(

@@ -6,6 +6,8 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from sitl_mock.dynamics.params import DEFAULT_VEHICLE, PRESET_NAMES
+
     parser.add_argument("--config", required=True, metavar="YAML", help="path, speed, gains, limits, flight settings")
     start = parser.add_mutually_exclusive_group()
     start.add_argument("--start", metavar="X,Y,Z", help="hover start, world ENU metres (z up); default: the path's start")
@@ -13,7 +15,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="thrown start, world ENU (z up), m and m/s; motors locked until the throw trigger")  # fmt: skip
     parser.add_argument("--throw-height", type=float, metavar="H", help="throw activation height, m (default: config, else 2)")
     parser.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4", help="mock autopilot profile (default px4)")
-    parser.add_argument("--vehicle", choices=("fast", "px4-default"), default="fast", help="simulated airframe (default fast)")
+    parser.add_argument("--vehicle", choices=PRESET_NAMES, default=DEFAULT_VEHICLE,
+                        help=f"simulated airframe (default {DEFAULT_VEHICLE}): fast = paper-like ideal, px4-sih = PX4's SIH "
+                        "quad (calibrated lag, drag, EKF-like position/velocity error), arducopter, px4-default")
+    parser.add_argument("--wind", metavar="E,N[,U]",
+                        help="constant wind, world ENU m/s (air velocity: 3,0 blows toward east at 3 m/s; U default 0)")
+    parser.add_argument("--wind-gusts", metavar="STD[,TAU]",
+                        help="random gusts on top of --wind: std m/s per axis, time constant s (default 2); seeded by --seed")
     parser.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: config)")
     parser.add_argument("--rate", type=float, metavar="HZ", help="control/telemetry rate (default: config flight.setpoint_rate_hz)")
     end = parser.add_mutually_exclusive_group()
@@ -30,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
 
     from pf_offboard.errors import InputError
     from pf_offboard.logs._io import make_dir
-    from pf_offboard.sim.flight import SimSpec, parse_start, parse_throw, simulate
+    from pf_offboard.sim.flight import SimSpec, parse_gusts, parse_start, parse_throw, parse_wind, simulate
 
     if not Path(args.config).is_file():
         raise InputError("--config", f"no such file: {args.config}")
@@ -40,6 +48,8 @@ def run(args: argparse.Namespace) -> int:
         throw_height_m=args.throw_height,
         autopilot=args.autopilot,
         vehicle=args.vehicle,
+        wind_enu_m_s=parse_wind(args.wind) if args.wind is not None else None,
+        wind_gusts=parse_gusts(args.wind_gusts) if args.wind_gusts is not None else None,
         output_mode=args.output,
         rate_hz=args.rate,
         duration_s=args.duration,

@@ -55,7 +55,9 @@ class SimSpec:
     throw_enu: tuple[float, ...] | None = None  # x, y, z, vx, vy, vz: thrown start, motors locked
     throw_height_m: float | None = None  # activation height of a throw (default: config, else 2 m)
     autopilot: str = "px4"  # px4 | ardupilot (the mock's profile)
-    vehicle: str = "fast"  # fast | px4-default (sitl_mock.dynamics presets)
+    vehicle: str = "fast"  # a sitl_mock.dynamics preset (PRESET_NAMES); the CLI defaults to DEFAULT_VEHICLE
+    wind_enu_m_s: tuple[float, float, float] | None = None  # constant wind, world ENU m/s (air velocity)
+    wind_gusts: tuple[float, float] | None = None  # random gusts: (std m/s per axis, time constant s)
     output_mode: str | None = None  # default: config flight.output_mode
     rate_hz: float | None = None  # control / telemetry rate; default: config flight.setpoint_rate_hz
     duration_s: float | None = None  # simulated time from the start
@@ -109,6 +111,31 @@ def parse_throw(text: str) -> tuple[float, ...]:
     return v
 
 
+MAX_WIND_M_S = 20.0
+
+
+def parse_wind(text: str) -> tuple[float, float, float]:
+    """``E,N[,U]`` (world ENU, m/s) of a constant wind; U defaults to 0."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError("--wind", f"expected E,N or E,N,U in m/s, got {text!r}") from None
+    if len(values) not in (2, 3):
+        raise InputError("--wind", f"expected E,N or E,N,U in m/s, got {text!r}")
+    return (values + (0.0,))[:3]  # type: ignore[return-value]
+
+
+def parse_gusts(text: str) -> tuple[float, float]:
+    """``STD[,TAU]`` of the random gusts: std m/s per axis, time constant s (default 2)."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError("--wind-gusts", f"expected STD or STD,TAU, got {text!r}") from None
+    if len(values) not in (1, 2):
+        raise InputError("--wind-gusts", f"expected STD or STD,TAU, got {text!r}")
+    return (values[0], values[1] if len(values) == 2 else 2.0)
+
+
 def _check(spec: SimSpec) -> None:
     if spec.autopilot not in ("px4", "ardupilot"):
         raise InputError("--autopilot", f"must be px4 or ardupilot, got {spec.autopilot!r}")
@@ -116,6 +143,18 @@ def _check(spec: SimSpec) -> None:
 
     if spec.vehicle not in PRESET_NAMES:
         raise InputError("--vehicle", f"must be one of {', '.join(PRESET_NAMES)}, got {spec.vehicle!r}")
+    if spec.wind_enu_m_s is not None:
+        w = spec.wind_enu_m_s
+        if len(w) != 3 or not all(math.isfinite(v) for v in w):
+            raise InputError("--wind", f"values must be 3 finite numbers (ENU m/s), got {w!r}")
+        if math.hypot(*w) > MAX_WIND_M_S:
+            raise InputError("--wind", f"wind speed must be <= {MAX_WIND_M_S:g} m/s, got {math.hypot(*w):.3g}")
+    if spec.wind_gusts is not None:
+        std, tau = spec.wind_gusts
+        if not (math.isfinite(std) and 0.0 <= std <= MAX_WIND_M_S / 2):
+            raise InputError("--wind-gusts", f"std must be in [0, {MAX_WIND_M_S / 2:g}] m/s, got {std}")
+        if not (math.isfinite(tau) and 0.05 <= tau <= 600.0):
+            raise InputError("--wind-gusts", f"time constant must be in [0.05, 600] s, got {tau}")
     if spec.start_enu_m is not None and spec.throw_enu is not None:
         raise InputError("--throw", "give either --start (hover) or --throw, not both")
     if spec.duration_s is not None and not (math.isfinite(spec.duration_s) and 0.0 < spec.duration_s <= 3600.0):
@@ -214,9 +253,14 @@ class SimFlight:
             if start[2] <= 0.2:
                 raise InputError("--start", f"the path starts at z = {start[2]:.2f} m; give --start above the ground")
             spawn = SpawnSpec("hover", tuple(map(float, frames.enu_to_ned(start))))  # type: ignore[arg-type]
+        wind: dict[str, Any] = {}
+        if spec.wind_enu_m_s is not None:
+            wind["wind_ned_m_s"] = tuple(map(float, frames.enu_to_ned(spec.wind_enu_m_s)))
+        if spec.wind_gusts is not None:
+            wind["wind_gust_std_m_s"], wind["wind_gust_time_constant_s"] = spec.wind_gusts
         mock = MockConfig(
             profile=spec.autopilot, vehicle=spec.vehicle, spawn=spawn, seed=spec.seed,
-            lockstep=True, lockstep_dt_s=self.dt_s, step_dt_s=self.dt_s, ekf_ready_delay_s=0.0,
+            lockstep=True, lockstep_dt_s=self.dt_s, step_dt_s=self.dt_s, ekf_ready_delay_s=0.0, **wind,
         )  # fmt: skip
         ap = Autopilot(mock, np.random.default_rng(spec.seed))
         ap.add_link(0)

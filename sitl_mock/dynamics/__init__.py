@@ -7,7 +7,17 @@
 See docs/sitl-mock-dynamics.md.
 """
 
-from .params import GRAVITY_M_S2, PRESET_NAMES, CascadeGains, VehicleParams, cascade_gains_for_poles, preset
+from .estimator import EstimatorNoise
+from .params import (
+    DEFAULT_VEHICLE,
+    GRAVITY_M_S2,
+    PRESET_NAMES,
+    REALISTIC_VEHICLE,
+    CascadeGains,
+    VehicleParams,
+    cascade_gains_for_poles,
+    preset,
+)
 from .sim import PHYSICS_DT_S, PHYSICS_RATE_HZ, Simulator, quat_mul
 from .types import (
     AccelerationSetpoint,
@@ -26,8 +36,8 @@ from .types import (
 )
 
 __all__ = [
-    "GRAVITY_M_S2", "PHYSICS_DT_S", "PHYSICS_RATE_HZ", "PRESET_NAMES",
-    "AccelerationSetpoint", "AttitudeSetpoint", "CascadeGains", "Gust", "MotorsOff", "PositionSetpoint",
+    "DEFAULT_VEHICLE", "GRAVITY_M_S2", "PHYSICS_DT_S", "PHYSICS_RATE_HZ", "PRESET_NAMES", "REALISTIC_VEHICLE",
+    "AccelerationSetpoint", "AttitudeSetpoint", "CascadeGains", "EstimatorNoise", "Gust", "MotorsOff", "PositionSetpoint",
     "RateSetpoint", "SensorNoise", "Setpoint", "Simulator", "Spawn", "VehicleParams", "VehicleState", "Wind",
     "cascade_gains_for_poles", "euler_to_quat", "preset", "quat_mul", "quat_to_euler",
 ]

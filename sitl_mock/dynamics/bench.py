@@ -63,6 +63,8 @@ def run_inprocess(quick: bool = False) -> dict[str, Any]:
         ("fast_aggressive_step20ms", "fast", _aggressive, 0.020, True),
         ("fast_aggressive_step1ms", "fast", _aggressive, 0.001, True),
         ("px4default_aggressive_step4ms", "px4-default", _aggressive, 0.004, True),
+        # Estimator error (10 Hz fusion) and the 60 ms setpoint latency on.
+        ("px4sih_aggressive_step4ms", "px4-sih", _aggressive, 0.004, True),
         ("fast_attitude_step4ms", "fast",
          lambda t: AttitudeSetpoint((math.cos(0.2), math.sin(0.2), 0.0, 0.0), 0.35, (0.0, 0.0, 0.5)), 0.004, True),
         ("fast_rates_step4ms", "fast", lambda t: RateSetpoint((0.0, 0.0, 0.3), 0.3), 0.004, True),

@@ -22,6 +22,7 @@ from collections import deque
 
 import numpy as np
 
+from .estimator import EstimatorError
 from .params import GRAVITY_M_S2, VehicleParams
 from .types import (
     AccelerationSetpoint,
@@ -98,9 +99,17 @@ class Simulator:
         spawn = spawn if spawn is not None else Spawn.ground()
         if not isinstance(spawn, Spawn):
             raise ValueError(f"Simulator.spawn: expected a Spawn, got {type(spawn).__name__}")
-        self.params = params
+        self._params = params
         # Independent streams: how often measure() is called must not change the trajectory.
         self._rng_wind, self._rng_sensors = rng.spawn(2)
+        # The estimator's stream is a third child, drawn only when it is on: presets without
+        # estimator noise keep their trajectories bit for bit.
+        self._est: EstimatorError | None = (
+            EstimatorError(params.estimator, rng.spawn(1)[0]) if params.estimator.enabled else None
+        )
+        # Setpoint latency: setpoints take effect setpoint_latency_s after they are given.
+        self._latency_ticks = int(round(params.setpoint_latency_s * PHYSICS_RATE_HZ))
+        self._pending_sp: deque[tuple[int, Setpoint]] = deque()
         self._init_constants(params)
         self._ticks = 0
         self._t_req_s = 0.0
@@ -117,6 +126,14 @@ class Simulator:
         self._rs = (0.0, 0.0, 0.0, t0)
         self._motors_on = spawn.motors_at_hover
         self._countdown = 0
+        self._rate_countdown = 0  # rate-loop ticks until the next motor-command update
+        self._motor_cmd = (t0, t0, t0, t0)  # motor commands held between rate-loop ticks, N
+        # Rate-loop output delay (sensing + actuator transport, in rate-loop ticks): a queue of the
+        # commands not yet applied, pre-filled with the spawn's; None when there is no delay.
+        n_delay = int(round(params.rate_loop_delay_s * params.rate_loop_hz))
+        self._motor_delay_q: deque[tuple[float, float, float, float]] | None = (
+            deque([(t0, t0, t0, t0)] * n_delay) if n_delay > 0 else None
+        )
         self._q_sp = q
         self._thrust_sp = params.hover_thrust if spawn.motors_at_hover else 0.0
         self._setpoint: Setpoint = AccelerationSetpoint((0.0, 0.0, 0.0)) if spawn.motors_at_hover else MotorsOff()
@@ -144,6 +161,20 @@ class Simulator:
     # ------------------------------------------------------------------------------------------
 
     @property
+    def params(self) -> VehicleParams:
+        """The vehicle's parameters. Assigning new ones (e.g. the autopilot's hover thrust after a
+        PARAM_SET) takes effect at the next tick; the estimator and the setpoint latency keep the
+        values they were built with."""
+        return self._params
+
+    @params.setter
+    def params(self, params: VehicleParams) -> None:
+        if not isinstance(params, VehicleParams):
+            raise ValueError(f"Simulator.params: expected VehicleParams, got {type(params).__name__}")
+        self._params = params
+        self._init_constants(params)
+
+    @property
     def time_s(self) -> float:
         return self._ticks * PHYSICS_DT_S
 
@@ -163,11 +194,31 @@ class Simulator:
         dt_s = _num("Simulator.step", "dt_s", dt_s, 0.0, 3600.0)
         if not isinstance(setpoint, _SETPOINT_TYPES):
             raise ValueError(f"Simulator.step.setpoint: unsupported setpoint {type(setpoint).__name__}")
-        self._select(setpoint)
         self._t_req_s += dt_s
-        n = int(round(self._t_req_s * PHYSICS_RATE_HZ)) - self._ticks
-        if n > 0:
-            self._run(n)
+        target = int(round(self._t_req_s * PHYSICS_RATE_HZ))
+        if self._latency_ticks == 0:
+            self._select(setpoint)
+            if target > self._ticks:
+                self._run(target - self._ticks)
+        else:
+            pending = self._pending_sp
+            pending.append((self._ticks + self._latency_ticks, setpoint))
+            while True:
+                while pending and pending[0][0] <= self._ticks:
+                    self._select(pending.popleft()[1])
+                if self._ticks >= target:
+                    break
+                stop = min(target, pending[0][0]) if pending else target
+                self._run(stop - self._ticks)
+        if self._est is not None:
+            self._est.advance_to(self._ticks * PHYSICS_DT_S)
+
+    def estimate_error(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """(position m, velocity m/s) error of the reported state, world NED: reported − true.
+        Zero unless ``params.estimator`` is on (see :mod:`sitl_mock.dynamics.estimator`)."""
+        if self._est is None:
+            return ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        return (self._est.position_error_ned_m, self._est.velocity_error_ned_m_s)
 
     def state(self) -> VehicleState:
         """The current true state."""
@@ -217,6 +268,11 @@ class Simulator:
         def noisy(a: np.ndarray, std: float) -> np.ndarray:
             return _ro(a + rng.normal(0.0, std, a.shape)) if std > 0.0 else a
 
+        position, velocity = base.position_ned_m, base.velocity_ned_m_s
+        if self._est is not None:  # the estimator's error (current, not delayed: it is slow)
+            ep, ev = self.estimate_error()
+            position, velocity = _ro(position + ep), _ro(velocity + ev)
+
         q = base.q_ned_frd
         if nz.attitude_std_rad > 0.0:
             e = rng.normal(0.0, nz.attitude_std_rad, 3)
@@ -225,8 +281,8 @@ class Simulator:
             q = _ro(qn / np.linalg.norm(qn))
         return VehicleState(
             time_s=base.time_s,
-            position_ned_m=noisy(base.position_ned_m, nz.position_std_m),
-            velocity_ned_m_s=noisy(base.velocity_ned_m_s, nz.velocity_std_m_s),
+            position_ned_m=noisy(position, nz.position_std_m),
+            velocity_ned_m_s=noisy(velocity, nz.velocity_std_m_s),
             accel_ned_m_s2=noisy(base.accel_ned_m_s2, nz.accel_std_m_s2),
             q_ned_frd=q,
             rates_frd_rad_s=noisy(base.rates_frd_rad_s, nz.rates_std_rad_s),
@@ -270,6 +326,7 @@ class Simulator:
         self._a_arm = pr.arm_length_m / math.sqrt(2.0)
         self._alpha_motor = 1.0 - math.exp(-dt / pr.motor_time_constant_s)
         self._att_div = int(round(PHYSICS_RATE_HZ / pr.attitude_loop_hz))
+        self._rate_div = int(round(PHYSICS_RATE_HZ / pr.rate_loop_hz))
         self._att_dt = self._att_div * dt
         rp, yw = pr.roll_pitch, pr.yaw
         # PX4 yaw weight: roll/pitch first. PX4 scales the yaw error by yaw_w and the yaw gain by
@@ -569,6 +626,11 @@ class Simulator:
         tqz = km * (t0 + t1 - t2 - t3)
         ticks = self._ticks
         ax = ay = az = 0.0
+        rdiv = self._rate_div
+        rdt = rdiv * dt
+        rcount = self._rate_countdown if on else 0
+        m0, m1, m2, m3 = self._motor_cmd
+        delay_q = self._motor_delay_q
         for _ in range(n):
             if countdown <= 0:
                 countdown = div
@@ -588,88 +650,100 @@ class Simulator:
             countdown -= 1
             ticks += 1
             if on:
-                # Body-rate controller (P + I + motor-torque feedback) and mixer. Clamps are
-                # written out: a function call here costs more than the whole comparison.
-                ex, ey, ez = rsx - wx, rsy - wy, rsz - wz
-                ix += ex * dt
-                iy += ey * dt
-                iz += ez * dt
-                if ix > ilx:
-                    ix = ilx
-                elif ix < -ilx:
-                    ix = -ilx
-                if iy > ily:
-                    iy = ily
-                elif iy < -ily:
-                    iy = -ily
-                if iz > ilz:
-                    iz = ilz
-                elif iz < -ilz:
-                    iz = -ilz
-                r = kpx * ex + kix * ix
-                if r > avail:
-                    r = avail
-                elif r < -avail:
-                    r = -avail
-                p = kpy * ey + kiy * iy
-                if p > avail:
-                    p = avail
-                elif p < -avail:
-                    p = -avail
-                yv = kpz * ez + kiz * iz
-                if yv > avail:
-                    yv = avail
-                elif yv < -avail:
-                    yv = -avail
-                r = ldx * r - kdx * tqx
-                p = ldy * p - kdy * tqy
-                yv = ldz * yv - kdz * tqz
-                rp0 = p - r
-                rp2 = r + p
-                a0 = rp0 if rp0 >= 0.0 else -rp0
-                a2 = rp2 if rp2 >= 0.0 else -rp2
-                mm = a0 if a0 > a2 else a2
-                if mm > half:  # roll/pitch alone saturate: scale them, keep their ratio
-                    s = half / mm
-                    rp0 *= s
-                    rp2 *= s
-                    a0 *= s
-                    a2 *= s
-                    mm = half
-                # Roll/pitch first: the collective may drop to make room at the top; at the bottom
-                # it rises (airmode) or roll/pitch shrink (PX4 default, airmode off).
-                # Collective, led against the motors' present mean thrust like the torques.
-                c = cc + lead_c * (cc - 0.25 * (t0 + t1 + t2 + t3)) if lead_c > 0.0 else cc
-                if c > tmax - mm:
-                    c = tmax - mm
-                if c < tmin + mm and airmode:
-                    c = tmin + mm
-                elif c < tmin + mm:
-                    if c <= tmin:
-                        c = tmin
-                        rp0 = rp2 = a0 = a2 = mm = 0.0
-                    else:
-                        s = (c - tmin) / mm
+                if rcount <= 0:
+                    # Rate-loop tick (every tick at 1 kHz; held between ticks when slower).
+                    rcount = rdiv
+                    # Body-rate controller (P + I + motor-torque feedback) and mixer. Clamps are
+                    # written out: a function call here costs more than the whole comparison.
+                    ex, ey, ez = rsx - wx, rsy - wy, rsz - wz
+                    ix += ex * rdt
+                    iy += ey * rdt
+                    iz += ez * rdt
+                    if ix > ilx:
+                        ix = ilx
+                    elif ix < -ilx:
+                        ix = -ilx
+                    if iy > ily:
+                        iy = ily
+                    elif iy < -ily:
+                        iy = -ily
+                    if iz > ilz:
+                        iz = ilz
+                    elif iz < -ilz:
+                        iz = -ilz
+                    r = kpx * ex + kix * ix
+                    if r > avail:
+                        r = avail
+                    elif r < -avail:
+                        r = -avail
+                    p = kpy * ey + kiy * iy
+                    if p > avail:
+                        p = avail
+                    elif p < -avail:
+                        p = -avail
+                    yv = kpz * ez + kiz * iz
+                    if yv > avail:
+                        yv = avail
+                    elif yv < -avail:
+                        yv = -avail
+                    r = ldx * r - kdx * tqx
+                    p = ldy * p - kdy * tqy
+                    yv = ldz * yv - kdz * tqz
+                    rp0 = p - r
+                    rp2 = r + p
+                    a0 = rp0 if rp0 >= 0.0 else -rp0
+                    a2 = rp2 if rp2 >= 0.0 else -rp2
+                    mm = a0 if a0 > a2 else a2
+                    if mm > half:  # roll/pitch alone saturate: scale them, keep their ratio
+                        s = half / mm
                         rp0 *= s
                         rp2 *= s
                         a0 *= s
                         a2 *= s
-                yhi = tmax - c - a0
-                lim = c - a2 - tmin
-                if lim < yhi:
-                    yhi = lim
-                ylo = tmin - c + a0
-                lim = c + a2 - tmax
-                if lim > ylo:
-                    ylo = lim
-                if yv > yhi:
-                    yv = yhi
-                elif yv < ylo:
-                    yv = ylo
-                t0 += am * (c + rp0 + yv - t0)
-                t1 += am * (c - rp0 + yv - t1)
-                t2 += am * (c + rp2 - yv - t2)
-                t3 += am * (c - rp2 - yv - t3)
+                        mm = half
+                    # Roll/pitch first: the collective may drop to make room at the top; at the bottom
+                    # it rises (airmode) or roll/pitch shrink (PX4 default, airmode off).
+                    # Collective, led against the motors' present mean thrust like the torques.
+                    c = cc + lead_c * (cc - 0.25 * (t0 + t1 + t2 + t3)) if lead_c > 0.0 else cc
+                    if c > tmax - mm:
+                        c = tmax - mm
+                    if c < tmin + mm and airmode:
+                        c = tmin + mm
+                    elif c < tmin + mm:
+                        if c <= tmin:
+                            c = tmin
+                            rp0 = rp2 = a0 = a2 = mm = 0.0
+                        else:
+                            s = (c - tmin) / mm
+                            rp0 *= s
+                            rp2 *= s
+                            a0 *= s
+                            a2 *= s
+                    yhi = tmax - c - a0
+                    lim = c - a2 - tmin
+                    if lim < yhi:
+                        yhi = lim
+                    ylo = tmin - c + a0
+                    lim = c + a2 - tmax
+                    if lim > ylo:
+                        ylo = lim
+                    if yv > yhi:
+                        yv = yhi
+                    elif yv < ylo:
+                        yv = ylo
+                    if delay_q is None:
+                        m0 = c + rp0 + yv
+                        m1 = c - rp0 + yv
+                        m2 = c + rp2 - yv
+                        m3 = c - rp2 - yv
+                    else:  # the motors get the command computed rate_loop_delay ticks ago
+                        delay_q.append((c + rp0 + yv, c - rp0 + yv, c + rp2 - yv, c - rp2 - yv))
+                        m0, m1, m2, m3 = delay_q.popleft()
+                rcount -= 1
+                t0 += am * (m0 - t0)
+                t1 += am * (m1 - t1)
+                t2 += am * (m2 - t2)
+                t3 += am * (m3 - t3)
             else:
                 t0 -= am * t0
                 t1 -= am * t1
@@ -756,6 +830,8 @@ class Simulator:
         self._accel = (ax, ay, az)
         self._ticks = ticks
         self._countdown = countdown
+        self._rate_countdown = rcount
+        self._motor_cmd = (m0, m1, m2, m3)
         self._rs = (rsx, rsy, rsz, cc)
         self._landed = landed
         self._crashed = crashed

@@ -22,7 +22,12 @@ def test_cascade_gains_place_a_triple_pole(pole: float) -> None:
 def test_presets_are_consistent(name: str) -> None:
     p = preset(name)
     assert p.name == name
-    assert p.hover_thrust == pytest.approx(p.true_hover_thrust, rel=1e-12)
+    if name == "px4-sih":
+        # Deliberate: PX4's hover-thrust parameter (0.5) vs SIH's true 0.490, as on the real one.
+        assert p.hover_thrust == 0.5
+        assert p.true_hover_thrust == pytest.approx(9.80665 / 20.0, rel=1e-12)
+    else:
+        assert p.hover_thrust == pytest.approx(p.true_hover_thrust, rel=1e-12)
     assert 4 * p.motor_thrust_max_n == pytest.approx(p.thrust_to_weight * p.weight_n)
     assert preset(name) == p  # a fresh, equal object each call
 
