@@ -40,7 +40,7 @@ from pf_offboard.errors import InputError
 from pf_offboard.identify.logdata import Segment
 
 GROUPS: dict[str, tuple[int, ...]] = {"xy": (0, 1), "z": (2,)}
-WINDOW_S = float(__import__("os").environ.get("WS", "0.6"))  # integral-equation window (s)
+WINDOW_S = 0.6  # integral-equation window (s)
 WINDOW_STRIDE_S = 0.1
 SIM_WINDOW_S = 2.0  # output-error check window (s)
 BURN_IN_S = 0.6  # filter warm-up at each segment start, not in the cost
@@ -210,10 +210,17 @@ def _input_integrals(gd: _GroupData, lag_s: float, delay_s: float) -> NDArray[np
     out = []
     for seg, win in zip(gd.segments, gd.windows):
         u = lagged(delayed(seg.accel_sp_enu_m_s2[:, gd.axes], seg.dt_s, delay_s), seg.dt_s, lag_s)
-        cu = _cumtrapz(u, seg.dt_s)
+        cu = _cumhold(u, seg.dt_s)
         for j in range(len(gd.axes)):
             out.append(cu[win.i1, j] - cu[win.i0, j])
     return np.concatenate(out)
+
+
+def _cumhold(x: NDArray[np.float64], dt_s: float) -> NDArray[np.float64]:
+    """∫x for a signal held from each sample to the next (the setpoint is; left Riemann sum)."""
+    c = np.zeros_like(x)
+    c[1:] = np.cumsum(x[:-1], axis=0) * dt_s
+    return c
 
 
 def _design(gd: _GroupData, iu: NDArray[np.float64]) -> NDArray[np.float64]:
