@@ -7,11 +7,13 @@ stale-state watchdog, take-over, hand-back), the ``.tlog`` / ``.csv`` logs — f
 :func:`excite` is ``identify --connect``: it connects like ``fly``, flies the excitation, hands back in
 the hold mode and returns the log directory for :mod:`.cli` to fit.
 
-The excitation (world ENU, m/s²): per axis, a sequence of doublets ``+A`` for T then ``−A`` for T
-(T random in ``DWELL_S``, the sign random, a rest of random length between doublets), from an
-explicit seeded generator, independent per axis, on top of a soft position hold
-``−ω²(p − p0) − 2ζω v`` around the start ``p0``. A doublet returns the velocity to zero, so the
-vehicle stays within about ``A·T²`` (0.54 m horizontal, 0.36 m vertical at the defaults) of p0.
+The excitation (world ENU, m/s²): first ``settle_s`` of stiff position hold around the start ``p0``
+(PID, its integral learns a constant disturbance such as a wrong hover thrust), then per axis a
+sequence of doublets ``+A`` for T then ``−A`` for T (T random in ``dwell_s``, a rest of random length
+between doublets, amplitudes and default signs from an explicit seeded generator, independent per
+axis; the sign steers towards p0 when the vehicle is off it) on top of a soft hold
+``−ω²(p − p0) − 2ζω v − I`` (integral I frozen). A doublet returns the velocity to zero, so the
+vehicle stays within about ``A·T²`` (0.64 m horizontal, 0.5 m vertical at the defaults) of p0.
 
 Limits (checked every step; any one aborts): position outside the ``box_m`` half-width cube around
 p0, speed above ``max_speed_m_s``, measured tilt above ``max_tilt_deg``. On abort the follower
@@ -42,13 +44,14 @@ class ExcitationSpec:
     """The excitation and its limits. World ENU; units in the names."""
 
     duration_s: float = 16.0  # excitation time after the settle
-    settle_s: float = 1.0  # hold at the start before the first doublet
+    settle_s: float = 3.0  # stiff hold (with integral) at the start before the first doublet
     amplitude_xy_m_s2: float = 1.0
     amplitude_z_m_s2: float = 0.8
     dwell_s: tuple[float, float] = (0.4, 0.8)  # half-length T of a doublet, uniform
     rest_s: tuple[float, float] = (0.0, 0.5)  # pause between doublets, uniform
     hold_bandwidth_rad_s: float = 0.6  # ω of the position hold (soft: see ExcitationSignal)
-    hold_damping: float = 0.5  # ζ of the position hold
+    hold_damping: float = 0.5  # ζ of the position hold (soft: see ExcitationSignal)
+    settle_bandwidth_rad_s: float = 1.5  # ω of the settle hold: PID with a triple pole at −ω
     box_m: float = 1.0  # abort when |p − p0| exceeds this on any axis
     max_speed_m_s: float = 2.0
     max_tilt_deg: float = 35.0
@@ -63,6 +66,7 @@ class ExcitationSpec:
             "amplitude_z_m_s2": (self.amplitude_z_m_s2, 0.05, 3.0),
             "hold_bandwidth_rad_s": (self.hold_bandwidth_rad_s, 0.1, 5.0),
             "hold_damping": (self.hold_damping, 0.1, 3.0),
+            "settle_bandwidth_rad_s": (self.settle_bandwidth_rad_s, 0.2, 5.0),
             "--box": (self.box_m, 0.2, 5.0),
             "--max-speed": (self.max_speed_m_s, 0.2, 10.0),
             "--max-tilt": (self.max_tilt_deg, 5.0, 60.0),
@@ -158,6 +162,8 @@ class ExcitationFollower:
     start_time_s: float | None = field(default=None, init=False)
     abort_reason: str = field(default="", init=False)
     _signs: dict[tuple[int, int], float] = field(default_factory=dict, init=False)
+    _integral_m_s2: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3), init=False)
+    _last_time_s: float | None = field(default=None, init=False)
     speed = math.nan  # no path speed (Pipeline reads it for the step log)
 
     def __post_init__(self) -> None:
@@ -218,10 +224,21 @@ class ExcitationFollower:
         s = self.spec
         if not self.abort_reason:
             self.abort_reason = self.limit_violation(p, v)
-        w = s.hold_bandwidth_rad_s
-        accel = -w * w * (p - self.start_position_enu_m) - 2.0 * s.hold_damping * w * v
-        if not self.abort_reason:
-            accel = accel + self._excitation(p - self.start_position_enu_m)
+        now = self.clock()
+        dt = 0.0 if self._last_time_s is None else min(max(now - self._last_time_s, 0.0), 0.1)
+        self._last_time_s = now
+        e = p - self.start_position_enu_m
+        if self.excitation_time_s() < 0.0 or self.abort_reason:
+            # settle (and after an abort): stiff PID, triple pole at -ω; the integral learns the
+            # constant disturbance (a hover-thrust error, wind) so the soft hold need not fight it
+            w = s.settle_bandwidth_rad_s
+            self._integral_m_s2 = self._integral_m_s2 + (w**3) * e * dt
+            accel = -3.0 * w * w * e - 3.0 * w * v - self._integral_m_s2
+        else:
+            # excitation: soft PD, integral frozen, doublets on top
+            w = s.hold_bandwidth_rad_s
+            accel = -w * w * e - 2.0 * s.hold_damping * w * v - self._integral_m_s2
+            accel = accel + self._excitation(e)
         norm = float(np.linalg.norm(accel))
         if norm > s.max_accel_m_s2:
             accel *= s.max_accel_m_s2 / norm
@@ -392,10 +409,17 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
 
 
 # ---------------------------------------------------------------------------------- in process (sim)
-def simulate_excitation(config_path: str | Path, sim_spec: Any, spec: ExcitationSpec, out_dir: str | Path) -> Any:
+def simulate_excitation(
+    config_path: str | Path,
+    sim_spec: Any,
+    spec: ExcitationSpec,
+    out_dir: str | Path,
+    prepare: Callable[[Any], None] | None = None,
+) -> Any:
     """The excitation flown in process against the mock (``pf_offboard.sim``'s lockstep flight,
     the excitation follower in place of the path follower). ``sim_spec``: a
     :class:`pf_offboard.sim.flight.SimSpec` (vehicle preset, output mode, rate, start, duration).
+    ``prepare(flight)`` may change the mock before it flies (tests: a wrong hover-thrust parameter).
     Returns its :class:`~pf_offboard.sim.flight.SimResult`; the ``.tlog`` is what ``identify`` reads.
     """
     from pf_offboard.sim.flight import SimFlight
@@ -413,4 +437,6 @@ def simulate_excitation(config_path: str | Path, sim_spec: Any, spec: Excitation
 
     flight.pipeline.follower = ExcitationFollower(spec, vehicle_time, attitude=attitude)
     flight.pipeline.speed_ref_m_s = math.nan
+    if prepare is not None:
+        prepare(flight)
     return flight.run()
