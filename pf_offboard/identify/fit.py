@@ -142,14 +142,22 @@ def delayed(u: NDArray[np.float64], dt_s: float, delay_s: float) -> NDArray[np.f
 
 
 def lagged(u: NDArray[np.float64], dt_s: float, lag_s: float) -> NDArray[np.float64]:
-    """First-order lag ``1/(lag s + 1)`` of ``u`` (axis 0), exact for a held input, started at
-    rest on ``u[0]``."""
+    """First-order lag ``1/(lag s + 1)`` of ``u`` (axis 0; ``u[k]`` held over [t_k, t_k+1)),
+    sampled at the grid times: exact, started at rest on ``u[0]``."""
     if lag_s <= 1e-6:
         return u
     alpha = math.exp(-dt_s / lag_s)
     zi = np.asarray(u[0], dtype=float) * alpha  # steady state: y = u[0]
-    y, _ = lfilter([1.0 - alpha], [1.0, -alpha], u, axis=0, zi=zi[np.newaxis, ...])
+    y, _ = lfilter([0.0, 1.0 - alpha], [1.0, -alpha], u, axis=0, zi=zi[np.newaxis, ...])
     return np.asarray(y)
+
+
+def lag_increments(u: NDArray[np.float64], dt_s: float, lag_s: float) -> NDArray[np.float64]:
+    """∫ of the lag's output over each grid interval [t_k, t_k+1) (exact for ``u`` held)."""
+    if lag_s <= 1e-6:
+        return u * dt_s
+    y = lagged(u, dt_s, lag_s)
+    return u * dt_s + (y - u) * lag_s * (1.0 - math.exp(-dt_s / lag_s))
 
 
 # ------------------------------------------------------------------------------- regression
@@ -209,18 +217,12 @@ def _group_data(segments: Sequence[Segment], axes: tuple[int, ...]) -> _GroupDat
 def _input_integrals(gd: _GroupData, lag_s: float, delay_s: float) -> NDArray[np.float64]:
     out = []
     for seg, win in zip(gd.segments, gd.windows):
-        u = lagged(delayed(seg.accel_sp_enu_m_s2[:, gd.axes], seg.dt_s, delay_s), seg.dt_s, lag_s)
-        cu = _cumhold(u, seg.dt_s)
+        inc = lag_increments(delayed(seg.accel_sp_enu_m_s2[:, gd.axes], seg.dt_s, delay_s), seg.dt_s, lag_s)
+        cu = np.zeros_like(inc)
+        cu[1:] = np.cumsum(inc[:-1], axis=0)
         for j in range(len(gd.axes)):
             out.append(cu[win.i1, j] - cu[win.i0, j])
     return np.concatenate(out)
-
-
-def _cumhold(x: NDArray[np.float64], dt_s: float) -> NDArray[np.float64]:
-    """∫x for a signal held from each sample to the next (the setpoint is; left Riemann sum)."""
-    c = np.zeros_like(x)
-    c[1:] = np.cumsum(x[:-1], axis=0) * dt_s
-    return c
 
 
 def _design(gd: _GroupData, iu: NDArray[np.float64]) -> NDArray[np.float64]:

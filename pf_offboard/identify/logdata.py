@@ -256,7 +256,9 @@ def load_log(
         [k == kind and (i >= 0 and bool(hb_active[i])) for k, i in zip(raw.sp_kind, hb_idx)], dtype=bool
     ) if len(hb_unix) else np.array([k == kind for k in raw.sp_kind], dtype=bool)  # fmt: skip
     grid = np.arange(lpn_t[0], lpn_t[-1], dt)
-    idx = _hold_index(sp_t, grid)
+    # the grid sample k stands for the interval [t_k, t_k+1): it takes the setpoint that arrived by
+    # its middle (a setpoint answering the telemetry of t_k is sent a moment after t_k)
+    idx = _hold_index(sp_t, grid + 0.5 * dt)
     valid = idx >= 0
     safe = np.where(valid, idx, 0)
     valid &= sp_active[safe] & (grid - sp_t[safe] <= MAX_SETPOINT_AGE_S)
