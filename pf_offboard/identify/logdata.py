@@ -5,11 +5,12 @@ uniformly resampled data where the app's setpoints were flying the vehicle. This
 of :mod:`pf_offboard.identify`; the fitting (:mod:`.fit`) works on these arrays.
 
 Clocks: every sample is put on the **autopilot's boot clock** (seconds). Telemetry carries it
-(``time_boot_ms``); our setpoints carry only the tlog's UNIX stamp of sending, so the UNIX stamps
-of LOCAL_POSITION_NED receptions are regressed on their boot times (slope and offset: a lockstep
-SITL's clock need not run at wall-clock rate) and the setpoints are mapped through that line. The
-offset is taken at the lower envelope of the residuals (the fastest telemetry delivery), so the
-transport delay of our setpoints to the vehicle ends up in the fitted ``delay``, where it belongs.
+(``time_boot_ms``); so do pf-offboard's setpoints: each is stamped with the boot time of the
+telemetry sample it answers and sent at once, which places it exactly (the few milliseconds of
+transport then count as delay only where they are not already in the telemetry's own latency).
+For setpoints without such stamps the tlog's UNIX stamps are mapped through a line fitted to the
+LOCAL_POSITION_NED receptions (slope and offset: a SITL's clock need not run at wall-clock rate;
+offset at the lower envelope, the fastest delivery).
 
 Active samples: a setpoint counts when it is an acceleration setpoint (SET_POSITION_TARGET_LOCAL_NED
 with position ignored and acceleration used), or a SET_ATTITUDE_TARGET (quaternion + thrust, or
@@ -106,6 +107,7 @@ class _Raw:
     hb_unix: list[float]
     hb_active: list[bool]
     sp_unix: list[float]
+    sp_boot: list[float]
     sp_kind: list[str]
     sp_accel_ned: list[tuple[float, float, float]]
     sp_q_ned_frd: list[tuple[float, float, float, float]]
@@ -126,7 +128,7 @@ def _heartbeat_active(msg: Any) -> bool:
 def _read_raw(path: Path) -> _Raw:
     from pf_offboard.logs.tlog import iter_tlog
 
-    raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], {}, None)
+    raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], [], {}, None)
     last_lpn_t = -math.inf
     for entry in iter_tlog(path):
         msg = entry.message
@@ -159,6 +161,7 @@ def _read_raw(path: Path) -> _Raw:
             mask = msg.type_mask
             ok = msg.coordinate_frame == _MAV_FRAME_LOCAL_NED and mask & _POS_IGNORE == _POS_IGNORE and not mask & _ACC_IGNORE
             raw.sp_unix.append(entry.time_unix_s)
+            raw.sp_boot.append(msg.time_boot_ms * 1e-3)
             raw.sp_kind.append("acceleration" if ok else "other")
             raw.sp_accel_ned.append((msg.afx, msg.afy, msg.afz))
             raw.sp_q_ned_frd.append((1.0, 0.0, 0.0, 0.0))
@@ -166,6 +169,7 @@ def _read_raw(path: Path) -> _Raw:
             raw.sp_thrust.append(math.nan)
         elif kind == "SET_ATTITUDE_TARGET":
             raw.sp_unix.append(entry.time_unix_s)
+            raw.sp_boot.append(msg.time_boot_ms * 1e-3)
             raw.sp_kind.append("rates" if msg.type_mask & _ATTITUDE_IGNORE else "attitude")
             raw.sp_accel_ned.append((math.nan, math.nan, math.nan))
             raw.sp_q_ned_frd.append(tuple(float(c) for c in msg.q))  # type: ignore[arg-type]
@@ -184,6 +188,24 @@ def _clock_map(raw: _Raw) -> tuple[float, float]:
     resid = (u - u[0]) - slope * (t - t[0])
     offset = float(u[0] + np.percentile(resid, 2.0) - slope * t[0])
     return float(slope), offset
+
+
+def _setpoint_times(raw: _Raw, lpn_t: NDArray[np.float64], slope: float, offset: float) -> NDArray[np.float64]:
+    """Boot-clock time of each setpoint.
+
+    pf-offboard stamps a setpoint with the boot time of the telemetry sample it answers
+    (``time_boot_ms``) and sends it at once: when (nearly) all setpoints carry such stamps, they are
+    used — exact, and immune to wall-clock jitter (a lockstep simulator's wall clock does not run
+    evenly). Otherwise (another sender), the UNIX stamps go through the fitted clock line.
+    """
+    boot = np.asarray(raw.sp_boot, dtype=float)
+    unix_mapped = (np.asarray(raw.sp_unix) - offset) / slope
+    if len(boot) == 0:
+        return unix_mapped
+    inside = (boot >= lpn_t[0] - 1.0) & (boot <= lpn_t[-1] + 1.0) & (boot > 0.0)
+    if np.mean(inside) >= 0.9 and np.all(np.abs(boot[inside] - unix_mapped[inside]) < 5.0):
+        return np.where(inside, boot, unix_mapped)
+    return unix_mapped
 
 
 def _hover_thrust(
@@ -248,7 +270,7 @@ def load_log(
     period = float((lpn_t[-1] - lpn_t[0]) / (len(lpn_t) - 1))
     dt = grid_dt_s if grid_dt_s is not None else min(max(period, 0.002), 0.01)
     # setpoints on the boot clock, and whether each one was flying
-    sp_t = (np.asarray(raw.sp_unix) - offset) / slope
+    sp_t = _setpoint_times(raw, lpn_t, slope, offset)
     hb_unix = np.asarray(raw.hb_unix)
     hb_idx = _hold_index(hb_unix, np.asarray(raw.sp_unix))
     hb_active = np.asarray(raw.hb_active, dtype=bool)
