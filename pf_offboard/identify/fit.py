@@ -109,7 +109,9 @@ def common_delay_s(ident: Identification) -> float:
 
 
 def model_fields(ident: Identification) -> dict[str, float]:
-    """VehicleModel's field values from a fit, clamped to VehicleModel's bounds, rounded."""
+    """VehicleModel's field values from a fit, clamped to VehicleModel's bounds, rounded.
+
+    ``rate_time_constant_s`` only when the log had body-rate setpoints (else it is not known)."""
 
     def clamp(v: float, lo: float, hi: float, nd: int = 3) -> float:
         return round(min(max(v, lo), hi), nd)
@@ -123,8 +125,7 @@ def model_fields(ident: Identification) -> dict[str, float]:
         "accel_gain_z": clamp(ident.z.gain, 0.2, 5.0),
         "drag_xy_1_s": clamp(ident.xy.drag_1_s, 0.0, 10.0),
         "drag_z_1_s": clamp(ident.z.drag_1_s, 0.0, 10.0),
-        "rate_time_constant_s": clamp(ident.rate.time_constant_s, 0.0, 1.0) if ident.rate is not None else 0.0,
-    }
+    } | ({"rate_time_constant_s": clamp(ident.rate.time_constant_s, 0.0, 1.0)} if ident.rate is not None else {})
 
 
 # ------------------------------------------------------------------------------- signal models

@@ -46,9 +46,10 @@ def _axis_line(f: AxisFit) -> str:
     )
 
 
-def vehicle_yaml(ident: Identification) -> str:
-    """The ``vehicle:`` config section (VehicleModel's field names), as YAML text."""
-    fields = model_fields(ident)
+def vehicle_yaml(ident: Identification, keep: dict[str, Any] | None = None) -> str:
+    """The ``vehicle:`` config section (VehicleModel's field names), as YAML text; ``keep``: values
+    of an existing section for the fields this fit did not determine (rate_time_constant_s)."""
+    fields = {**(keep or {}), **model_fields(ident)}
     body = "".join(f"  {k}: {v:g}\n" for k, v in fields.items())
     return "vehicle:  # identified by pf-offboard identify\n" + body
 
@@ -94,6 +95,8 @@ def merge_vehicle_section(config_text: str, ident: Identification, source: str) 
         raise InputError(source, f"not valid YAML: {exc}") from None
     if data is not None and not isinstance(data, dict):
         raise InputError(source, "not a config (a mapping of sections)")
+    old = data.get("vehicle") if isinstance(data, dict) else None
+    keep = {k: v for k, v in old.items() if k == "rate_time_constant_s"} if isinstance(old, dict) else {}
     lines = config_text.splitlines(keepends=True)
     out: list[str] = []
     skipping = False
@@ -109,7 +112,7 @@ def merge_vehicle_section(config_text: str, ident: Identification, source: str) 
     text = "".join(out)
     if text and not text.endswith("\n"):
         text += "\n"
-    return text + vehicle_yaml(ident)
+    return text + vehicle_yaml(ident, keep)
 
 
 def write_config(path: Path, ident: Identification, base: Path | None) -> None:

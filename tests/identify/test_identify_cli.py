@@ -35,8 +35,9 @@ def test_report_and_vehicle_section(good_log, capsys) -> None:
     out = capsys.readouterr().out
     assert "acceleration setpoints" in out and "R^2" in out and "NRMSE" in out
     section = yaml.safe_load(out[out.index("vehicle:"):])["vehicle"]
+    # no body-rate setpoints in this log: the rate loop is not written (not known)
     assert set(section) == {"accel_lag_xy_s", "accel_lag_z_s", "accel_delay_s", "accel_gain_xy", "accel_gain_z",
-                            "drag_xy_1_s", "drag_z_1_s", "rate_time_constant_s"}  # fmt: skip
+                            "drag_xy_1_s", "drag_z_1_s"}  # fmt: skip
     assert section["drag_xy_1_s"] == pytest.approx(0.6, rel=0.05)
 
 
@@ -50,13 +51,14 @@ def test_json(good_log, capsys) -> None:
 
 def test_write_config_merges_into_a_copy_of_the_config(good_log, tmp_path, capsys) -> None:
     base = tmp_path / "paper.yaml"
-    text = (REPO / "configs" / "paper.yaml").read_text() + "vehicle:\n  accel_lag_xy_s: 1.5  # old\n\n"
+    text = (REPO / "configs" / "paper.yaml").read_text() + "vehicle:\n  accel_lag_xy_s: 1.5  # old\n  rate_time_constant_s: 0.07\n\n"
     base.write_text(text)
     out = tmp_path / "identified.yaml"
     assert main(["identify", str(good_log), "--config", str(base), "--write-config", str(out)]) == 0
     cfg = load_config(out)  # a valid config, with the identified vehicle
     assert cfg.vehicle.drag_xy_1_s == pytest.approx(0.6, rel=0.05)
     assert cfg.vehicle.accel_lag_xy_s < 1.0  # the old section was replaced, not appended to
+    assert cfg.vehicle.rate_time_constant_s == 0.07  # not identified by this log: kept
     assert cfg.path == load_config(REPO / "configs" / "paper.yaml").path  # everything else kept
     assert base.read_text() == text  # the base is not touched
     assert out.read_text().count("vehicle:") == 1
