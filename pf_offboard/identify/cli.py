@@ -28,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     fly.add_argument("--box", type=float, default=1.0, metavar="M", help="abort to hold beyond M metres from the start on any axis (default 1)")
     fly.add_argument("--max-speed", type=float, default=2.0, metavar="M_S", help="abort above this speed (default 2 m/s)")
     fly.add_argument("--max-tilt", type=float, default=35.0, metavar="DEG", help="abort above this tilt (default 35 deg)")
-    fly.add_argument("--amplitude", type=float, default=1.0, metavar="M_S2", help="horizontal doublet amplitude (default 1 m/s^2; vertical 0.8 of it)")
+    fly.add_argument("--amplitude", type=float, default=0.6, metavar="M_S2", help="horizontal doublet amplitude (default 0.6 m/s^2; vertical 0.8 of it)")
     fly.add_argument("--seed", type=int, default=0, help="seed of the excitation's random doublets")
     fly.add_argument("--autopilot", choices=("auto", "px4", "ardupilot"), default="auto", help="default: from HEARTBEAT")
     fly.add_argument("--target-system", type=int, metavar="ID", help="vehicle system id (default: first autopilot heard)")

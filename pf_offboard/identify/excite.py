@@ -13,7 +13,7 @@ sequence of doublets ``+A`` for T then ``−A`` for T (T random in ``dwell_s``, 
 between doublets, amplitudes and default signs from an explicit seeded generator, independent per
 axis; the sign steers towards p0 when the vehicle is off it) on top of a soft hold
 ``−ω²(p − p0) − 2ζω v − I`` (integral I frozen). A doublet returns the velocity to zero, so the
-vehicle stays within about ``A·T²`` (0.64 m horizontal, 0.5 m vertical at the defaults) of p0.
+vehicle stays within about ``A·T²`` (0.4 m horizontal, 0.3 m vertical at the defaults) of p0.
 
 Limits (checked every step; any one aborts): position outside the ``box_m`` half-width cube around
 p0, speed above ``max_speed_m_s``, measured tilt above ``max_tilt_deg``. On abort the follower
@@ -45,8 +45,8 @@ class ExcitationSpec:
 
     duration_s: float = 16.0  # excitation time after the settle
     settle_s: float = 3.0  # stiff hold (with integral) at the start before the first doublet
-    amplitude_xy_m_s2: float = 1.0
-    amplitude_z_m_s2: float = 0.8
+    amplitude_xy_m_s2: float = 0.6
+    amplitude_z_m_s2: float = 0.5
     dwell_s: tuple[float, float] = (0.4, 0.8)  # half-length T of a doublet, uniform
     rest_s: tuple[float, float] = (0.0, 0.5)  # pause between doublets, uniform
     hold_bandwidth_rad_s: float = 0.6  # ω of the position hold (soft: see ExcitationSignal)

@@ -44,7 +44,7 @@ def _run(port: int, config: Path, log_dir: Path, *flags: str) -> int:
 
 def test_excitation_flight_is_bounded_and_identifies_the_mock(tmp_path, capsys) -> None:
     with run_in_thread(_mock()) as mock:
-        code = _run(mock.ports.udp, _config(tmp_path), tmp_path / "log", "--duration", "14", "--amplitude", "0.6", "--json")
+        code = _run(mock.ports.udp, _config(tmp_path), tmp_path / "log", "--duration", "14", "--json")  # default amplitude
         mode = mock.call(lambda m: m.autopilot.mode.name)
     captured = capsys.readouterr()
     assert code == 0, captured.err
