@@ -150,12 +150,13 @@ class ExcitationFollower:
 
     ``clock`` returns the current vehicle time (s; the state sample's autopilot clock), so the
     excitation is a deterministic function of the telemetry (``replay`` reproduces it).
-    ``yaw_rad``: heading held (ENU). After :attr:`abort_reason` is set, only the hold is flown.
+    ``yaw_rad``: heading held (ENU, rad); None: the heading ``attitude()`` reports at the first
+    update (0 if unknown). After :attr:`abort_reason` is set, only the hold is flown.
     """
 
     spec: ExcitationSpec
     clock: Callable[[], float]
-    yaw_rad: float = 0.0
+    yaw_rad: float | None = None
     attitude: Callable[[], NDArray[np.float64] | None] = field(default=lambda: None)
     signal: ExcitationSignal = field(init=False)
     start_position_enu_m: NDArray[np.float64] | None = field(default=None, init=False)
@@ -221,6 +222,11 @@ class ExcitationFollower:
             self.start_position_enu_m = p.copy()
         if self.start_time_s is None:
             self.start_time_s = self.clock()
+        if self.yaw_rad is None:
+            from pf_offboard.app.encoders import yaw_of
+
+            q = self.attitude()
+            self.yaw_rad = yaw_of(q) if q is not None else 0.0
         s = self.spec
         if not self.abort_reason:
             self.abort_reason = self.limit_violation(p, v)
@@ -244,13 +250,14 @@ class ExcitationFollower:
             accel *= s.max_accel_m_s2 / norm
         f = (float(accel[0]), float(accel[1]), float(accel[2]) + GRAVITY_M_S2)
         thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
-        q = quaternion_from_axes(*attitude_from_thrust(f, self.yaw_rad))
+        yaw = float(self.yaw_rad)
+        q = quaternion_from_axes(*attitude_from_thrust(f, yaw))
         return Command(
             acceleration=accel,
             thrust=thrust,
             attitude=np.array(q),
             body_rates=np.zeros(3),
-            yaw=self.yaw_rad,
+            yaw=yaw,
             yaw_rate=0.0,
             state=_NAN_STATE,
             lam=math.nan,
@@ -379,12 +386,11 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
                 pipeline.encoder = pipeline.encoder.with_hover_thrust(float(hover))
             if profile.autopilot is Autopilot.ARDUPILOT:
                 await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
-            est = estimator.latest
-            if est is not None and est.q_enu_flu is not None:
-                from pf_offboard.app.encoders import yaw_of
 
-                follower.yaw_rad = yaw_of(est.q_enu_flu)  # hold the heading we found
+        import signal
 
+        loop = asyncio.get_running_loop()
+        loop.add_signal_handler(signal.SIGINT, bridge.request_stop)  # Ctrl-C: hand back, as fly does
         try:
             async with asyncio.TaskGroup() as tg:
                 flight = tg.create_task(bridge.fly(setup))
@@ -399,6 +405,8 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
             if isinstance(first, (InputError, LinkError)):
                 raise first from None
             raise
+        finally:
+            loop.remove_signal_handler(signal.SIGINT)
     finally:
         link.close()
         if log is not None:
