@@ -21,6 +21,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("fly", "pf_offboard.app.fly", "follow a path on a PX4 / ArduPilot vehicle over MAVLink"),
     ("sim", "pf_offboard.sim.cli", "in-process flight of the controller against the sitl_mock dynamics"),
     ("replay", "pf_offboard.logs.replay", "re-run the controller on a recorded flight and compare setpoints"),
+    ("identify", "pf_offboard.identify.cli", "fit the vehicle's inner-loop response (vehicle: section) from logs or a short excitation"),
     ("plot", "pf_offboard.logs.plot", "paper-style figures (Figs. 4-9) from flight logs"),
     ("bench", "pf_offboard.bench", "benchmarks: controller cost, simulation speed, MAVLink latency"),
 )

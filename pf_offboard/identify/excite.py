@@ -1,0 +1,450 @@
+"""A short, bounded excitation at hover, flown through the app's own pipeline.
+
+:class:`ExcitationFollower` stands in for the path follower (same ``update(position, velocity) ->
+Command`` / ``reset()`` interface), so ``fly``'s machinery — :class:`~pf_offboard.app.pipeline.Pipeline`,
+the encoders of every output mode, :class:`~pf_offboard.app.bridge.Bridge` (activation, keep-alive,
+stale-state watchdog, take-over, hand-back), the ``.tlog`` / ``.csv`` logs — flies it unchanged.
+:func:`excite` is ``identify --connect``: it connects like ``fly``, flies the excitation, hands back in
+the hold mode and returns the log directory for :mod:`.cli` to fit.
+
+The excitation (world ENU, m/s²): first ``settle_s`` of stiff position hold around the start ``p0``
+(PID, its integral learns a constant disturbance such as a wrong hover thrust), then per axis a
+sequence of doublets ``+A`` for T then ``−A`` for T (T random in ``dwell_s``, a rest of random length
+between doublets, amplitudes and default signs from an explicit seeded generator, independent per
+axis; the sign steers towards p0 when the vehicle is off it) on top of a soft hold
+``−ω²(p − p0) − 2ζω v − I`` (integral I frozen). A doublet returns the velocity to zero, so the
+vehicle stays within about ``A·T²`` (0.4 m horizontal, 0.3 m vertical at the defaults) of p0.
+
+Limits (checked every step; any one aborts): position outside the ``box_m`` half-width cube around
+p0, speed above ``max_speed_m_s``, measured tilt above ``max_tilt_deg``. On abort the follower
+commands the position hold alone (no excitation) and the bridge is asked to hand back (hold mode).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pf_offboard.control.feedforward import attitude_from_thrust, quaternion_from_axes
+from pf_offboard.control.types import GRAVITY_M_S2, Command, Saturation, TransverseState
+from pf_offboard.errors import InputError
+
+_NAN_STATE = TransverseState(math.nan, math.nan, math.nan, math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True)
+class ExcitationSpec:
+    """The excitation and its limits. World ENU; units in the names."""
+
+    duration_s: float = 16.0  # excitation time after the settle
+    settle_s: float = 3.0  # stiff hold (with integral) at the start before the first doublet
+    amplitude_xy_m_s2: float = 0.6
+    amplitude_z_m_s2: float = 0.5
+    dwell_s: tuple[float, float] = (0.4, 0.8)  # half-length T of a doublet, uniform
+    rest_s: tuple[float, float] = (0.0, 0.5)  # pause between doublets, uniform
+    hold_bandwidth_rad_s: float = 0.6  # ω of the position hold (soft: see ExcitationSignal)
+    hold_damping: float = 0.5  # ζ of the position hold (soft: see ExcitationSignal)
+    settle_bandwidth_rad_s: float = 1.5  # ω of the settle hold: PID with a triple pole at −ω
+    box_m: float = 1.0  # abort when |p − p0| exceeds this on any axis
+    max_speed_m_s: float = 2.0
+    max_tilt_deg: float = 35.0
+    max_accel_m_s2: float = 4.0  # |commanded acceleration| clip (hold + excitation)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        checks = {
+            "--duration": (self.duration_s, 2.0, 60.0),
+            "settle_s": (self.settle_s, 0.0, 10.0),
+            "amplitude_xy_m_s2": (self.amplitude_xy_m_s2, 0.05, 3.0),
+            "amplitude_z_m_s2": (self.amplitude_z_m_s2, 0.05, 3.0),
+            "hold_bandwidth_rad_s": (self.hold_bandwidth_rad_s, 0.1, 5.0),
+            "hold_damping": (self.hold_damping, 0.1, 3.0),
+            "settle_bandwidth_rad_s": (self.settle_bandwidth_rad_s, 0.2, 5.0),
+            "--box": (self.box_m, 0.2, 5.0),
+            "--max-speed": (self.max_speed_m_s, 0.2, 10.0),
+            "--max-tilt": (self.max_tilt_deg, 5.0, 60.0),
+            "max_accel_m_s2": (self.max_accel_m_s2, 0.5, 10.0),
+        }
+        for name, (v, lo, hi) in checks.items():
+            if not (math.isfinite(v) and lo <= v <= hi):
+                raise InputError(name, f"must be in [{lo:g}, {hi:g}], got {v}")
+        for name, (lo, hi) in (("dwell_s", self.dwell_s), ("rest_s", self.rest_s)):
+            if not (0.0 <= lo <= hi <= 5.0):
+                raise InputError(name, f"must be 0 <= min <= max <= 5 s, got ({lo}, {hi})")
+        if not 0 <= self.seed < 2**63:
+            raise InputError("--seed", f"must be in [0, 2^63), got {self.seed}")
+
+    @property
+    def total_s(self) -> float:
+        """Settle + excitation + 1 s of hold at the end (the flight's length after activation)."""
+        return self.settle_s + self.duration_s + 1.0
+
+
+@dataclass(frozen=True)
+class ExcitationSignal:
+    """Per axis (x, y, z; ENU), a schedule of doublets: doublet ``k`` starts ``start_s[k]`` seconds
+    after the excitation's start, is ``level_m_s2[k]`` for ``half_s[k]`` then the opposite for as
+    long. Its sign is chosen when it starts (:meth:`sign_for`): towards the start position when the
+    vehicle is off it, else ``random_sign[k]``; so the excitation itself keeps the vehicle near the
+    start and the position hold can stay soft (a stiff hold would make the setpoint a copy of the
+    velocity, and drag could not be told from gain)."""
+
+    start_s: tuple[NDArray[np.float64], ...]
+    half_s: tuple[NDArray[np.float64], ...]
+    level_m_s2: tuple[NDArray[np.float64], ...]
+    random_sign: tuple[NDArray[np.float64], ...]
+    end_s: float
+
+    @classmethod
+    def doublets(cls, spec: ExcitationSpec) -> ExcitationSignal:
+        """Random doublets per axis from ``np.random.default_rng(spec.seed)`` (see the module)."""
+        rng = np.random.default_rng(spec.seed)
+        starts, halves, levels, signs = [], [], [], []
+        for amplitude in (spec.amplitude_xy_m_s2, spec.amplitude_xy_m_s2, spec.amplitude_z_m_s2):
+            t, st, hf, lv, sg = 0.0, [], [], [], []
+            while True:
+                t += float(rng.uniform(*spec.rest_s))
+                half = float(rng.uniform(*spec.dwell_s))
+                if t + 2.0 * half > spec.duration_s:
+                    break
+                st.append(t)
+                hf.append(half)
+                lv.append(amplitude * float(rng.uniform(0.6, 1.0)))
+                sg.append(1.0 if rng.random() < 0.5 else -1.0)
+                t += 2.0 * half
+            starts.append(np.array(st))
+            halves.append(np.array(hf))
+            levels.append(np.array(lv))
+            signs.append(np.array(sg))
+        return cls(tuple(starts), tuple(halves), tuple(levels), tuple(signs), spec.duration_s)
+
+    def doublet_at(self, axis: int, t_s: float) -> int:
+        """Index of the doublet running on ``axis`` at ``t_s`` (−1: none, resting)."""
+        k = int(np.searchsorted(self.start_s[axis], t_s, side="right")) - 1
+        if k < 0 or t_s >= self.start_s[axis][k] + 2.0 * self.half_s[axis][k]:
+            return -1
+        return k
+
+    def sign_for(self, axis: int, k: int, offset_m: float, deadband_m: float = 0.1) -> float:
+        """Sign of doublet ``k``'s first half given the offset from the start on that axis (m)."""
+        if abs(offset_m) > deadband_m:
+            return -1.0 if offset_m > 0.0 else 1.0
+        return float(self.random_sign[axis][k])
+
+    def value(self, axis: int, k: int, t_s: float, sign: float) -> float:
+        """Acceleration (m/s²) of doublet ``k`` at ``t_s`` with its first half's ``sign``."""
+        first = t_s < self.start_s[axis][k] + self.half_s[axis][k]
+        return float(sign * self.level_m_s2[axis][k] * (1.0 if first else -1.0))
+
+
+@dataclass
+class ExcitationFollower:
+    """Excitation + position hold around the first position seen (``update`` like PathFollower).
+
+    ``clock`` returns the current vehicle time (s; the state sample's autopilot clock), so the
+    excitation is a deterministic function of the telemetry (``replay`` reproduces it).
+    ``yaw_rad``: heading held (ENU, rad); None: the heading ``attitude()`` reports at the first
+    update (0 if unknown). After :attr:`abort_reason` is set, only the hold is flown.
+    """
+
+    spec: ExcitationSpec
+    clock: Callable[[], float]
+    yaw_rad: float | None = None
+    attitude: Callable[[], NDArray[np.float64] | None] = field(default=lambda: None)
+    signal: ExcitationSignal = field(init=False)
+    start_position_enu_m: NDArray[np.float64] | None = field(default=None, init=False)
+    start_time_s: float | None = field(default=None, init=False)
+    abort_reason: str = field(default="", init=False)
+    _signs: dict[tuple[int, int], float] = field(default_factory=dict, init=False)
+    _integral_m_s2: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3), init=False)
+    _last_time_s: float | None = field(default=None, init=False)
+    speed = math.nan  # no path speed (Pipeline reads it for the step log)
+
+    def __post_init__(self) -> None:
+        self.signal = ExcitationSignal.doublets(self.spec)
+
+    def reset(self) -> None:
+        """An estimator reset: the position may have jumped, so hold where we are now."""
+        self.start_position_enu_m = None
+
+    def limit_violation(self, position: NDArray[np.float64], velocity: NDArray[np.float64]) -> str:
+        """Which limit the state breaks ("" if none)."""
+        s = self.spec
+        assert self.start_position_enu_m is not None
+        off = np.abs(position - self.start_position_enu_m)
+        if float(np.max(off)) > s.box_m:
+            return f"left the {s.box_m:g} m box around the start (offset {np.round(position - self.start_position_enu_m, 2).tolist()} m ENU)"
+        speed = float(np.linalg.norm(velocity))
+        if speed > s.max_speed_m_s:
+            return f"speed {speed:.2f} m/s above {s.max_speed_m_s:g} m/s"
+        q = self.attitude()
+        if q is not None:
+            w, x, y, z = q
+            cos_tilt = 1.0 - 2.0 * (x * x + y * y)  # body z · world z
+            tilt = math.degrees(math.acos(max(-1.0, min(1.0, cos_tilt))))
+            if tilt > s.max_tilt_deg:
+                return f"tilt {tilt:.0f} deg above {s.max_tilt_deg:g} deg"
+        return ""
+
+    def excitation_time_s(self) -> float:
+        """Seconds since the excitation started (negative while settling)."""
+        assert self.start_time_s is not None
+        return self.clock() - self.start_time_s - self.spec.settle_s
+
+    def _excitation(self, offset_enu_m: NDArray[np.float64]) -> NDArray[np.float64]:
+        t = self.excitation_time_s()
+        out = np.zeros(3)
+        if t < 0.0 or t >= self.signal.end_s:
+            return out
+        for axis in range(3):
+            k = self.signal.doublet_at(axis, t)
+            if k < 0:
+                continue
+            if (axis, k) not in self._signs:  # decided once, when the doublet starts
+                self._signs[(axis, k)] = self.signal.sign_for(axis, k, float(offset_enu_m[axis]))
+            out[axis] = self.signal.value(axis, k, t, self._signs[(axis, k)])
+        return out
+
+    def update(self, position: ArrayLike, velocity: ArrayLike) -> Command:
+        """Acceleration = hold + excitation (clipped); attitude and thrust from it (ENU, FLU)."""
+        p = np.asarray(position, dtype=float)
+        v = np.asarray(velocity, dtype=float)
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v))):
+            raise InputError("state", "non-finite position or velocity")
+        if self.start_position_enu_m is None:
+            self.start_position_enu_m = p.copy()
+        if self.start_time_s is None:
+            self.start_time_s = self.clock()
+        if self.yaw_rad is None:
+            from pf_offboard.app.encoders import yaw_of
+
+            q = self.attitude()
+            self.yaw_rad = yaw_of(q) if q is not None else 0.0
+        s = self.spec
+        if not self.abort_reason:
+            self.abort_reason = self.limit_violation(p, v)
+        now = self.clock()
+        dt = 0.0 if self._last_time_s is None else min(max(now - self._last_time_s, 0.0), 0.1)
+        self._last_time_s = now
+        e = p - self.start_position_enu_m
+        if self.excitation_time_s() < 0.0 or self.abort_reason:
+            # settle (and after an abort): stiff PID, triple pole at -ω; the integral learns the
+            # constant disturbance (a hover-thrust error, wind) so the soft hold need not fight it
+            w = s.settle_bandwidth_rad_s
+            self._integral_m_s2 = self._integral_m_s2 + (w**3) * e * dt
+            accel = -3.0 * w * w * e - 3.0 * w * v - self._integral_m_s2
+        else:
+            # excitation: soft PD, integral frozen, doublets on top
+            w = s.hold_bandwidth_rad_s
+            accel = -w * w * e - 2.0 * s.hold_damping * w * v - self._integral_m_s2
+            accel = accel + self._excitation(e)
+        norm = float(np.linalg.norm(accel))
+        if norm > s.max_accel_m_s2:
+            accel *= s.max_accel_m_s2 / norm
+        f = (float(accel[0]), float(accel[1]), float(accel[2]) + GRAVITY_M_S2)
+        thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        yaw = float(self.yaw_rad)
+        q = quaternion_from_axes(*attitude_from_thrust(f, yaw))
+        return Command(
+            acceleration=accel,
+            thrust=thrust,
+            attitude=np.array(q),
+            body_rates=np.zeros(3),
+            yaw=yaw,
+            yaw_rate=0.0,
+            state=_NAN_STATE,
+            lam=math.nan,
+            cross_track_m=float(np.linalg.norm(p - self.start_position_enu_m)),
+            saturation=Saturation(False, False, False, norm > s.max_accel_m_s2, False),
+        )
+
+
+# ---------------------------------------------------------------------------------- identify --connect
+@dataclass(frozen=True)
+class ExciteOutcome:
+    """How the excitation flight ended."""
+
+    exit_code: int  # as fly's: 0 ok, 3 link, 4 taken over
+    reason: str
+    log_dir: Path | None
+    tlog: Path | None
+    aborted: str  # the limit that aborted the excitation ("" if none)
+
+
+def excite(args: argparse.Namespace, spec: ExcitationSpec, stream: TextIO) -> ExciteOutcome:
+    """Connect, fly the excitation (``--airborne`` or ``--takeoff``), hand back; never hangs."""
+    import asyncio
+
+    from pf_offboard.app.fly import flight_settings
+    from pf_offboard.app.link import parse_endpoint
+    from pf_offboard.config import load_config
+    from pf_offboard.errors import LinkError
+
+    endpoint = parse_endpoint(args.connect)
+    config = load_config(args.config)
+    settings = flight_settings(config, argparse.Namespace(output=args.output, end_action=None))
+    if args.takeoff is not None and not (math.isfinite(args.takeoff) and 0.3 <= args.takeoff <= 100.0):
+        raise InputError("--takeoff", f"height must be in [0.3, 100] m, got {args.takeoff}")
+    if args.log_dir:
+        from pf_offboard.logs._io import make_dir
+
+        make_dir(args.log_dir, "--log-dir")
+    try:
+        return asyncio.run(_excite(args, endpoint, config, settings, spec, stream))
+    except LinkError as exc:
+        print(f"pf-offboard identify: link error: {exc}", file=stream)
+        return ExciteOutcome(3, str(exc), None, None, "")
+
+
+async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings: Any, spec: ExcitationSpec, stream: TextIO) -> ExciteOutcome:
+    """``fly``'s set-up and bridge with the excitation follower (see pf_offboard.app.fly._fly)."""
+    import asyncio
+    import time
+
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    from pf_offboard.app.bridge import Bridge, BridgeOptions, EndSpec
+    from pf_offboard.app.encoders import Encoder
+    from pf_offboard.app.estimator import Estimator
+    from pf_offboard.app.fly import _check_guid_options, default_log_dir
+    from pf_offboard.app.link import Link
+    from pf_offboard.app.pipeline import Pipeline
+    from pf_offboard.app.profiles import Autopilot, select_profile
+    from pf_offboard.errors import LinkError
+    from pf_offboard.logs.flightlog import FlightLog
+
+    link = Link.open(endpoint)
+    log: FlightLog | None = None
+    try:
+        target = await link.wait_heartbeat(args.heartbeat_timeout, args.target_system)
+        profile = select_profile(args.autopilot, target.autopilot)
+        link.set_source_system(target.system)
+        log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
+        try:
+            log = FlightLog.open(log_dir, name="identify", config_path=args.config)
+        except OSError as exc:
+            raise InputError("--log-dir", f"cannot write the logs in {log_dir}: {exc.strerror or exc}") from None
+        flight_log = log
+        link.on_received = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
+        link.on_sent = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
+        encoder = Encoder(
+            settings.output_mode, profile, target.system, target.component,
+            hover_thrust=settings.hover_thrust if settings.hover_thrust is not None else 0.5,
+            time_constant_s=settings.attitude_time_constant_s,
+        )  # fmt: skip
+        estimator = Estimator("local_position")
+
+        def vehicle_time() -> float:
+            est = estimator.latest
+            return est.time_s if est is not None else 0.0
+
+        def attitude() -> NDArray[np.float64] | None:
+            est = estimator.latest
+            return est.q_enu_flu if est is not None else None
+
+        follower = ExcitationFollower(spec, vehicle_time, attitude=attitude)
+        pipeline = Pipeline(follower, encoder, estimator)
+        launch = "takeoff" if args.takeoff is not None else "airborne"
+        options = BridgeOptions(
+            launch=launch,
+            height_m=args.takeoff if args.takeoff is not None else math.nan,
+            end=EndSpec(duration_s=spec.total_s, open_path_end=False),
+            end_action="hold",
+            setpoint_rate_hz=settings.setpoint_rate_hz,
+            state_timeout_s=settings.state_timeout_s,
+            status=not args.quiet,
+        )
+        bridge_box: list[Any] = []
+
+        def on_step(step: Any) -> None:
+            flight_log.step(step.record)
+            if follower.abort_reason and bridge_box and step.record.mode == "following":
+                bridge_box[0].request_stop(f"excitation aborted: {follower.abort_reason}")
+
+        bridge = Bridge(link, profile, pipeline, options, 1.0, True, 1.0, on_step=on_step, status_stream=stream)
+        bridge_box.append(bridge)
+        link.start_reading(bridge.on_message)
+
+        async def setup() -> None:
+            for msg_id, rate in (
+                (mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED, settings.setpoint_rate_hz),
+                (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz),
+                (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0),
+            ):
+                bridge.request_interval(msg_id, rate)
+            if settings.hover_thrust is None and settings.output_mode != "acceleration":
+                hover = await bridge.read_param(profile.hover_thrust_param)
+                if not 0.05 <= hover <= 0.95:
+                    raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
+                pipeline.encoder = pipeline.encoder.with_hover_thrust(float(hover))
+            if profile.autopilot is Autopilot.ARDUPILOT:
+                await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
+
+        import signal
+
+        loop = asyncio.get_running_loop()
+        loop.add_signal_handler(signal.SIGINT, bridge.request_stop)  # Ctrl-C: hand back, as fly does
+        try:
+            async with asyncio.TaskGroup() as tg:
+                flight = tg.create_task(bridge.fly(setup))
+                helpers = [tg.create_task(bridge.keepalive()), tg.create_task(bridge.heartbeat()), tg.create_task(bridge.status_line())]
+                result = await flight
+                for task in helpers:
+                    task.cancel()
+        except BaseExceptionGroup as group:
+            first: BaseException = group
+            while isinstance(first, BaseExceptionGroup):
+                first = first.exceptions[0]
+            if isinstance(first, (InputError, LinkError)):
+                raise first from None
+            raise
+        finally:
+            loop.remove_signal_handler(signal.SIGINT)
+    finally:
+        link.close()
+        if log is not None:
+            log.close()
+    assert log is not None
+    print(f"pf-offboard identify: excitation flight: {result.reason} (exit {result.exit_code})", file=stream)
+    return ExciteOutcome(result.exit_code, result.reason, log.paths.tlog.parent, log.paths.tlog, follower.abort_reason)
+
+
+# ---------------------------------------------------------------------------------- in process (sim)
+def simulate_excitation(
+    config_path: str | Path,
+    sim_spec: Any,
+    spec: ExcitationSpec,
+    out_dir: str | Path,
+    prepare: Callable[[Any], None] | None = None,
+) -> Any:
+    """The excitation flown in process against the mock (``pf_offboard.sim``'s lockstep flight,
+    the excitation follower in place of the path follower). ``sim_spec``: a
+    :class:`pf_offboard.sim.flight.SimSpec` (vehicle preset, output mode, rate, start, duration).
+    ``prepare(flight)`` may change the mock before it flies (tests: a wrong hover-thrust parameter).
+    Returns its :class:`~pf_offboard.sim.flight.SimResult`; the ``.tlog`` is what ``identify`` reads.
+    """
+    from pf_offboard.sim.flight import SimFlight
+
+    flight = SimFlight(config_path, sim_spec, out_dir)
+    estimator = flight.pipeline.estimator
+
+    def vehicle_time() -> float:
+        est = estimator.latest
+        return est.time_s if est is not None else 0.0
+
+    def attitude() -> NDArray[np.float64] | None:
+        est = estimator.latest
+        return est.q_enu_flu if est is not None else None
+
+    flight.pipeline.follower = ExcitationFollower(spec, vehicle_time, attitude=attitude)
+    flight.pipeline.speed_ref_m_s = math.nan
+    if prepare is not None:
+        prepare(flight)
+    return flight.run()

@@ -1,0 +1,355 @@
+"""What ``identify`` needs from a flight log: setpoints and the vehicle's response, resampled.
+
+Reads a ``fly`` / ``sim`` ``.tlog`` (or ``.tlog.gz``) and returns :class:`Segment` s: stretches of
+uniformly resampled data where the app's setpoints were flying the vehicle. This is the only I/O
+of :mod:`pf_offboard.identify`; the fitting (:mod:`.fit`) works on these arrays.
+
+Clocks: every sample is put on the **autopilot's boot clock** (seconds). Telemetry carries it
+(``time_boot_ms``); so do pf-offboard's setpoints: each is stamped with the boot time of the
+telemetry sample it answers and sent at once, which places it exactly (the few milliseconds of
+transport then count as delay only where they are not already in the telemetry's own latency).
+For setpoints without such stamps the tlog's UNIX stamps are mapped through a line fitted to the
+LOCAL_POSITION_NED receptions (slope and offset: a SITL's clock need not run at wall-clock rate;
+offset at the lower envelope, the fastest delivery).
+
+Active samples: a setpoint counts when it is an acceleration setpoint (SET_POSITION_TARGET_LOCAL_NED
+with position ignored and acceleration used), or a SET_ATTITUDE_TARGET (quaternion + thrust, or
+body rates + thrust), sent while the autopilot's latest HEARTBEAT said armed and in the app's mode
+(PX4 OFFBOARD / ArduPilot GUIDED). Take-off position setpoints and anything before the mode switch
+are left out. A grid sample is used when its setpoint is at most ``MAX_SETPOINT_AGE_S`` old.
+
+Frames: velocities and accelerations are converted to world ENU, attitudes to body FLU → ENU,
+through :mod:`pf_offboard.frames`; body rates stay body FRD (only their magnitude response is fitted).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pf_offboard import frames
+from pf_offboard.control.types import GRAVITY_M_S2
+from pf_offboard.errors import InputError
+
+SETPOINT_KINDS = ("acceleration", "attitude", "rates")
+MAX_SETPOINT_AGE_S = 0.25  # a setpoint older than this no longer describes what the vehicle flies
+MIN_SEGMENT_S = 1.0  # shorter active stretches are dropped
+THRUST_NORM_G_M_S2 = 9.81  # the encoders' thrust normalisation: thrust = T / 9.81 * hover_thrust
+HOVER_THRUST_PARAMS = ("MPC_THR_HOVER", "MOT_THST_HOVER")
+
+_MAV_AUTOPILOT_INVALID = 8
+_ARMED = 128
+_PX4_OFFBOARD_MAIN = 6
+_ARDUPILOT_GUIDED = (4, 20)  # GUIDED, GUIDED_NOGPS
+_MAV_AUTOPILOT_PX4 = 12
+_POS_IGNORE = 0x007
+_ACC_IGNORE = 0x1C0
+_ATTITUDE_IGNORE = 128
+_MAV_FRAME_LOCAL_NED = 1
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One stretch of active flight on a uniform grid (autopilot boot clock).
+
+    ``accel_sp_enu_m_s2``: the acceleration the app asked for (world ENU, gravity excluded),
+    held from each setpoint to the next; for attitude setpoints ``T·z_b(q_sp) − g·e_z`` with
+    ``T = thrust / hover_thrust · 9.81``; for body-rate setpoints the same with the *measured*
+    attitude. ``velocity_enu_m_s``: LOCAL_POSITION_NED velocity, linearly interpolated.
+    ``rates_sp_frd_rad_s`` / ``rates_frd_rad_s``: body-rate setpoints and ATTITUDE_QUATERNION
+    rates (rates-mode logs only, else None).
+    """
+
+    source: str
+    kind: str  # acceleration | attitude | rates
+    time_s: NDArray[np.float64]  # (N,) s, boot clock, uniform step dt_s
+    dt_s: float
+    accel_sp_enu_m_s2: NDArray[np.float64]  # (N, 3)
+    velocity_enu_m_s: NDArray[np.float64]  # (N, 3)
+    rates_sp_frd_rad_s: NDArray[np.float64] | None = None  # (N, 3)
+    rates_frd_rad_s: NDArray[np.float64] | None = None  # (N, 3)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time_s[-1] - self.time_s[0]) if len(self.time_s) > 1 else 0.0
+
+
+@dataclass(frozen=True)
+class LogData:
+    """Everything identify took from one log: its active segments and how they were found."""
+
+    source: str
+    kind: str  # the setpoint kind flown (acceleration | attitude | rates)
+    segments: tuple[Segment, ...]
+    hover_thrust: float | None  # used to turn attitude / rates thrust into acceleration
+    hover_thrust_source: str  # "--hover-thrust", "config", "MPC_THR_HOVER", ... or "" (not needed)
+    clock_slope: float  # UNIX seconds per boot-clock second (1.0 for a real-time SITL)
+
+    @property
+    def duration_s(self) -> float:
+        return float(sum(s.duration_s for s in self.segments))
+
+
+@dataclass
+class _Raw:
+    lpn_t: list[float]
+    lpn_unix: list[float]
+    lpn_v_ned: list[tuple[float, float, float]]
+    att_t: list[float]
+    att_q_ned_frd: list[tuple[float, float, float, float]]
+    att_rates_frd: list[tuple[float, float, float]]
+    hb_unix: list[float]
+    hb_active: list[bool]
+    sp_unix: list[float]
+    sp_boot: list[float]
+    sp_kind: list[str]
+    sp_accel_ned: list[tuple[float, float, float]]
+    sp_q_ned_frd: list[tuple[float, float, float, float]]
+    sp_rates_frd: list[tuple[float, float, float]]
+    sp_thrust: list[float]
+    params: dict[str, float]
+    autopilot: int | None
+
+
+def _heartbeat_active(msg: Any) -> bool:
+    if not msg.base_mode & _ARMED:
+        return False
+    if msg.autopilot == _MAV_AUTOPILOT_PX4:
+        return (msg.custom_mode >> 16) & 0xFF == _PX4_OFFBOARD_MAIN
+    return msg.custom_mode in _ARDUPILOT_GUIDED
+
+
+def _read_raw(path: Path) -> _Raw:
+    from pf_offboard.logs.tlog import iter_tlog
+
+    raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], [], {}, None)
+    last_lpn_t = -math.inf
+    for entry in iter_tlog(path):
+        msg = entry.message
+        kind = msg.get_type()
+        if entry.direction == "in":
+            if kind == "LOCAL_POSITION_NED":
+                t = msg.time_boot_ms * 1e-3
+                v = (msg.vx, msg.vy, msg.vz)
+                if t > last_lpn_t and all(map(math.isfinite, v)):  # drop duplicated / reordered samples
+                    last_lpn_t = t
+                    raw.lpn_t.append(t)
+                    raw.lpn_unix.append(entry.time_unix_s)
+                    raw.lpn_v_ned.append(v)
+            elif kind == "ATTITUDE_QUATERNION":
+                q = (msg.q1, msg.q2, msg.q3, msg.q4)
+                r = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
+                if all(map(math.isfinite, q + r)) and abs(math.sqrt(sum(c * c for c in q)) - 1.0) < 1e-2:
+                    raw.att_t.append(msg.time_boot_ms * 1e-3)
+                    raw.att_q_ned_frd.append(q)
+                    raw.att_rates_frd.append(r)
+            elif kind == "HEARTBEAT" and msg.autopilot != _MAV_AUTOPILOT_INVALID:
+                raw.autopilot = msg.autopilot
+                raw.hb_unix.append(entry.time_unix_s)
+                raw.hb_active.append(_heartbeat_active(msg))
+            elif kind == "PARAM_VALUE":
+                pid = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode(errors="replace")
+                raw.params[pid.rstrip("\x00")] = float(msg.param_value)
+            continue
+        if kind == "SET_POSITION_TARGET_LOCAL_NED":
+            mask = msg.type_mask
+            ok = msg.coordinate_frame == _MAV_FRAME_LOCAL_NED and mask & _POS_IGNORE == _POS_IGNORE and not mask & _ACC_IGNORE
+            raw.sp_unix.append(entry.time_unix_s)
+            raw.sp_boot.append(msg.time_boot_ms * 1e-3)
+            raw.sp_kind.append("acceleration" if ok else "other")
+            raw.sp_accel_ned.append((msg.afx, msg.afy, msg.afz))
+            raw.sp_q_ned_frd.append((1.0, 0.0, 0.0, 0.0))
+            raw.sp_rates_frd.append((0.0, 0.0, 0.0))
+            raw.sp_thrust.append(math.nan)
+        elif kind == "SET_ATTITUDE_TARGET":
+            raw.sp_unix.append(entry.time_unix_s)
+            raw.sp_boot.append(msg.time_boot_ms * 1e-3)
+            raw.sp_kind.append("rates" if msg.type_mask & _ATTITUDE_IGNORE else "attitude")
+            raw.sp_accel_ned.append((math.nan, math.nan, math.nan))
+            raw.sp_q_ned_frd.append(tuple(float(c) for c in msg.q))  # type: ignore[arg-type]
+            raw.sp_rates_frd.append((msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate))
+            raw.sp_thrust.append(float(msg.thrust))
+    return raw
+
+
+def _clock_map(raw: _Raw) -> tuple[float, float]:
+    """UNIX time ≈ offset + slope · boot time, from LOCAL_POSITION_NED receptions (lower envelope)."""
+    t = np.asarray(raw.lpn_t)
+    u = np.asarray(raw.lpn_unix)
+    slope, offset = np.polyfit(t - t[0], u - u[0], 1)
+    if not 0.5 < slope < 2.0:  # not a clock: a paused or replayed log; assume real time
+        slope = 1.0
+    resid = (u - u[0]) - slope * (t - t[0])
+    offset = float(u[0] + np.percentile(resid, 2.0) - slope * t[0])
+    return float(slope), offset
+
+
+def _setpoint_times(raw: _Raw, lpn_t: NDArray[np.float64], slope: float, offset: float) -> NDArray[np.float64]:
+    """Boot-clock time of each setpoint.
+
+    pf-offboard stamps a setpoint with the boot time of the telemetry sample it answers
+    (``time_boot_ms``) and sends it at once: when (nearly) all setpoints carry such stamps, they are
+    used — exact, and immune to wall-clock jitter (a lockstep simulator's wall clock does not run
+    evenly). Otherwise (another sender), the UNIX stamps go through the fitted clock line.
+    """
+    boot = np.asarray(raw.sp_boot, dtype=float)
+    unix_mapped = (np.asarray(raw.sp_unix) - offset) / slope
+    if len(boot) == 0:
+        return unix_mapped
+    inside = (boot >= lpn_t[0] - 1.0) & (boot <= lpn_t[-1] + 1.0) & (boot > 0.0)
+    if np.mean(inside) >= 0.9 and np.all(np.abs(boot[inside] - unix_mapped[inside]) < 5.0):
+        return np.where(inside, boot, unix_mapped)
+    return unix_mapped
+
+
+def _hover_thrust(
+    raw: _Raw, path: Path, override: float | None, autopilot: int | None
+) -> tuple[float | None, str]:
+    if override is not None:
+        return override, "--hover-thrust"
+    from pf_offboard.logs.flightlog import FlightLogPaths
+
+    cfg = FlightLogPaths.beside(path).config_yaml
+    if cfg.is_file():
+        try:
+            import yaml
+
+            data = yaml.safe_load(cfg.read_text(encoding="utf-8"))
+            value = data.get("flight", {}).get("hover_thrust") if isinstance(data, dict) else None
+        except (OSError, yaml.YAMLError, AttributeError):
+            value = None
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and 0.0 < value < 1.0:
+            return float(value), f"config {cfg.name}"
+    for name in HOVER_THRUST_PARAMS:
+        if name in raw.params and 0.0 < raw.params[name] < 1.0:
+            return raw.params[name], f"{name} in the log"
+    return None, ""
+
+
+def _hold_index(times: NDArray[np.float64], at: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Index of the last ``times`` entry <= each ``at`` (−1 before the first)."""
+    return np.searchsorted(times, at, side="right") - 1
+
+
+def load_log(
+    path: str | Path, hover_thrust: float | None = None, grid_dt_s: float | None = None
+) -> LogData:
+    """Read one ``.tlog`` / ``.tlog.gz`` into active segments (see the module docstring).
+
+    ``hover_thrust``: the normalised hover thrust the app used for attitude / rates setpoints
+    (default: the log's sibling config ``flight.hover_thrust``, else the autopilot's parameter
+    recorded in the log). ``grid_dt_s``: resampling step (default: the telemetry period, at most
+    10 ms). Raises :class:`InputError` naming the file for anything unusable.
+    """
+    p = Path(path)
+    name = str(p)
+    if not p.exists():
+        raise InputError(name, "no such file")
+    if p.is_dir():
+        raise InputError(name, "is a directory, not a .tlog")
+    raw = _read_raw(p)
+    if len(raw.lpn_t) < 20:
+        raise InputError(name, f"only {len(raw.lpn_t)} LOCAL_POSITION_NED samples: no measured velocity to fit")
+    kinds = [k for k in raw.sp_kind if k in SETPOINT_KINDS]
+    if not kinds:
+        raise InputError(name, "no acceleration or attitude setpoints from the app (component 191) in the log")
+    kind = max(SETPOINT_KINDS, key=kinds.count)
+    slope, offset = _clock_map(raw)
+    hover, hover_src = (None, "")
+    if kind != "acceleration":
+        hover, hover_src = _hover_thrust(raw, p, hover_thrust, raw.autopilot)
+        if hover is None:
+            raise InputError(name, f"{kind} setpoints need the hover thrust the app used: none in the log or its config; pass --hover-thrust")
+    lpn_t = np.asarray(raw.lpn_t)
+    period = float((lpn_t[-1] - lpn_t[0]) / (len(lpn_t) - 1))
+    dt = grid_dt_s if grid_dt_s is not None else min(max(period, 0.002), 0.01)
+    # setpoints on the boot clock, and whether each one was flying
+    sp_t = _setpoint_times(raw, lpn_t, slope, offset)
+    hb_unix = np.asarray(raw.hb_unix)
+    hb_idx = _hold_index(hb_unix, np.asarray(raw.sp_unix))
+    hb_active = np.asarray(raw.hb_active, dtype=bool)
+    sp_active = np.array(
+        [k == kind and (i >= 0 and bool(hb_active[i])) for k, i in zip(raw.sp_kind, hb_idx)], dtype=bool
+    ) if len(hb_unix) else np.array([k == kind for k in raw.sp_kind], dtype=bool)  # fmt: skip
+    grid = np.arange(lpn_t[0], lpn_t[-1], dt)
+    # the grid sample k stands for the interval [t_k, t_k+1): it takes the setpoint that arrived by
+    # its middle (a setpoint answering the telemetry of t_k is sent a moment after t_k)
+    idx = _hold_index(sp_t, grid + 0.5 * dt)
+    valid = idx >= 0
+    safe = np.where(valid, idx, 0)
+    valid &= sp_active[safe] & (grid - sp_t[safe] <= MAX_SETPOINT_AGE_S)
+    # telemetry around each grid point (no interpolation across a telemetry gap)
+    j = np.clip(np.searchsorted(lpn_t, grid), 1, len(lpn_t) - 1)
+    valid &= (lpn_t[j] - lpn_t[j - 1]) <= max(5.0 * period, 0.1)
+    v_ned = np.asarray(raw.lpn_v_ned)
+    velocity = np.column_stack([np.interp(grid, lpn_t, v_ned[:, k]) for k in range(3)])
+    velocity_enu = np.array([frames.ned_to_enu(v) for v in velocity])
+    accel_enu, rates_sp, rates = _setpoint_accel(raw, kind, hover, safe, grid)
+    valid &= np.all(np.isfinite(accel_enu), axis=1)
+    segments = []
+    for start, stop in _runs(valid):
+        if (stop - start) * dt < MIN_SEGMENT_S:
+            continue
+        sl = slice(start, stop)
+        segments.append(Segment(
+            source=name, kind=kind, time_s=grid[sl], dt_s=dt, accel_sp_enu_m_s2=accel_enu[sl],
+            velocity_enu_m_s=velocity_enu[sl],
+            rates_sp_frd_rad_s=None if rates_sp is None else rates_sp[sl],
+            rates_frd_rad_s=None if rates is None else rates[sl],
+        ))  # fmt: skip
+    if not segments:
+        raise InputError(name, f"no stretch of at least {MIN_SEGMENT_S:g} s where {kind} setpoints were flying (armed, in OFFBOARD/GUIDED)")
+    return LogData(name, kind, tuple(segments), hover, hover_src, slope)
+
+
+def _setpoint_accel(
+    raw: _Raw, kind: str, hover: float | None, sp_idx: NDArray[np.int64], grid: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """Acceleration setpoint (ENU) on the grid; for rates logs also the rate setpoints and rates."""
+    n = len(grid)
+    g_enu = np.array([0.0, 0.0, GRAVITY_M_S2])
+    if kind == "acceleration":
+        a_ned = np.asarray(raw.sp_accel_ned, dtype=float)
+        per_sp = np.array([frames.ned_to_enu(a) if np.all(np.isfinite(a)) else (math.nan,) * 3 for a in a_ned])
+        return per_sp[sp_idx], None, None
+    assert hover is not None
+    thrust = np.asarray(raw.sp_thrust, dtype=float) / hover * THRUST_NORM_G_M_S2  # m/s^2
+    if kind == "attitude":
+        z_body = np.array([_body_z_enu(q) for q in raw.sp_q_ned_frd])
+        per_sp = z_body * thrust[:, None] - g_enu
+        return per_sp[sp_idx], None, None
+    # rates: the thrust acts along the measured body z
+    if len(raw.att_t) < 20:
+        return np.full((n, 3), math.nan), None, None
+    att_t = np.asarray(raw.att_t)
+    k = np.clip(_hold_index(att_t, grid), 0, len(att_t) - 1)
+    z_meas = np.array([_body_z_enu(raw.att_q_ned_frd[i]) for i in k])
+    z_meas[np.abs(grid - att_t[k]) > MAX_SETPOINT_AGE_S] = math.nan
+    accel = z_meas * thrust[sp_idx][:, None] - g_enu
+    rates_sp = np.asarray(raw.sp_rates_frd, dtype=float)[sp_idx]
+    att_r = np.asarray(raw.att_rates_frd, dtype=float)
+    rates = np.column_stack([np.interp(grid, att_t, att_r[:, c]) for c in range(3)])
+    return accel, rates_sp, rates
+
+
+def _body_z_enu(q_ned_frd: Sequence[float]) -> NDArray[np.float64]:
+    """Thrust direction (body +z FLU, i.e. up through the rotors) in world ENU."""
+    try:
+        q = frames.quat_ned_frd_to_enu_flu(q_ned_frd)
+    except ValueError:
+        return np.full(3, math.nan)
+    w, x, y, z = q
+    return np.array([2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)])
+
+
+def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """[start, stop) index pairs of the True runs of ``mask``."""
+    m = np.concatenate(([False], mask, [False])).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))

@@ -1,0 +1,95 @@
+"""Synthetic ``.tlog`` files with a known first-order vehicle, for identify's tests.
+
+The "vehicle" obeys exactly the model identify fits (world ENU): ``dv/dt = gain · lag(delay(a_sp))
+− drag · v + bias``, integrated at 1 kHz with the setpoint held; the log has what a ``fly`` log
+has: the autopilot's HEARTBEAT (armed, OFFBOARD), LOCAL_POSITION_NED (NED, boot clock) and our
+SET_POSITION_TARGET_LOCAL_NED acceleration setpoints (component 191), UNIX-stamped by a clock
+that may run at ``clock_rate`` times the boot clock (a lockstep SITL is not real time).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from pf_offboard import frames
+from pf_offboard.logs.tlog import TlogWriter
+
+EPOCH_UNIX_S = 1.7e9
+PX4_OFFBOARD = 6 << 16
+
+
+@dataclass(frozen=True)
+class Truth:
+    lag_xy_s: float = 0.12
+    lag_z_s: float = 0.04
+    delay_s: float = 0.03
+    gain_xy: float = 0.9
+    gain_z: float = 1.1
+    drag_xy_1_s: float = 0.6
+    drag_z_1_s: float = 0.4
+    bias_enu_m_s2: tuple[float, float, float] = (0.05, -0.02, -0.3)
+
+
+def write_tlog(
+    path: Path,
+    truth: Truth = Truth(),
+    duration_s: float = 20.0,
+    rate_hz: float = 100.0,
+    amplitude_m_s2: float = 1.0,
+    clock_rate: float = 1.0,
+    seed: int = 0,
+    setpoints: bool = True,
+    offboard_from_s: float = 0.0,
+) -> Path:
+    """Write the log; the setpoint is random steps (dwell 0.2-0.8 s) of ``amplitude_m_s2`` with
+    a soft velocity damping so the vehicle stays put."""
+    rng = np.random.default_rng(seed)
+    ap = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    app = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+    dt = 1.0 / rate_hz
+    n = int(round(duration_s * rate_hz))
+    lag = np.array([truth.lag_xy_s, truth.lag_xy_s, truth.lag_z_s])
+    gain = np.array([truth.gain_xy, truth.gain_xy, truth.gain_z])
+    drag = np.array([truth.drag_xy_1_s, truth.drag_xy_1_s, truth.drag_z_1_s])
+    bias = np.array(truth.bias_enu_m_s2)
+    v = np.zeros(3)
+    u = np.zeros(3)  # lag state
+    step = np.zeros(3)
+    next_change = np.zeros(3)
+    delay_steps = int(round(truth.delay_s * 1000))
+    history = [np.zeros(3)] * (delay_steps + 1)  # 1 kHz setpoint history for the delay
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with TlogWriter.open(path) as log:
+        def send(mav, msg, t_boot: float) -> None:
+            log.write(msg.pack(mav), EPOCH_UNIX_S + clock_rate * t_boot)
+            mav.seq = (mav.seq + 1) % 256
+
+        for k in range(n):
+            t = k * dt
+            if k % int(round(rate_hz / 10)) == 0:  # 10 Hz heartbeat
+                mode = PX4_OFFBOARD if t >= offboard_from_s else (4 << 16)
+                send(ap, mavlink.MAVLink_heartbeat_message(2, 12, 128 | 1, mode, 4, 3), t)
+            v_ned = frames.enu_to_ned(v)
+            send(ap, mavlink.MAVLink_local_position_ned_message(int(round(t * 1000)), 0.0, 0.0, -5.0, *map(float, v_ned)), t)
+            for j in range(3):
+                if t >= next_change[j]:
+                    step[j] = amplitude_m_s2 * rng.uniform(-1.0, 1.0)
+                    next_change[j] = t + rng.uniform(0.2, 0.8)
+            a_sp = step - 0.5 * v
+            if setpoints:
+                a_ned = frames.enu_to_ned(a_sp)
+                msg = mavlink.MAVLink_set_position_target_local_ned_message(
+                    int(round(t * 1000)), 1, 1, 1, 0x03F, 0, 0, 0, 0, 0, 0, *map(float, a_ned), 0.0, 0.0)  # fmt: skip
+                send(app, msg, t)
+            for _ in range(int(round(dt * 1000))):
+                history.append(a_sp.copy())
+                delayed = history[-1 - delay_steps]
+                history = history[-(delay_steps + 2):]
+                alpha = np.where(lag > 0, 1.0 - np.exp(-1e-3 / np.maximum(lag, 1e-9)), 1.0)
+                u = u + alpha * (delayed - u)
+                v = v + 1e-3 * (gain * u - drag * v + bias)
+    return path

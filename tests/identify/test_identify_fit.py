@@ -1,0 +1,89 @@
+"""identify on logs of a vehicle that obeys the fitted model exactly; the pieces on their own."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from pf_offboard.identify import identify, load_log
+from pf_offboard.identify.fit import delayed, lag_increments, lagged
+
+from .synthetic import Truth, write_tlog
+
+
+@pytest.fixture(scope="module")
+def truth_log(tmp_path_factory):
+    truth = Truth()
+    # the "SITL" clock runs 1.5 % slower than the wall clock: the boot clock must be recovered
+    return truth, write_tlog(tmp_path_factory.mktemp("syn") / "flight.tlog", truth, clock_rate=1.015)
+
+
+def test_recovers_every_parameter_of_an_exact_first_order_vehicle(truth_log) -> None:
+    truth, path = truth_log
+    log = load_log(path)
+    assert log.clock_slope == pytest.approx(1.015, abs=1e-4)
+    ident = identify(log.segments)
+    xy, z = ident.xy, ident.z
+    assert xy.lag_s == pytest.approx(truth.lag_xy_s, abs=0.005)
+    assert z.lag_s == pytest.approx(truth.lag_z_s, abs=0.005)
+    assert xy.delay_s == pytest.approx(truth.delay_s, abs=0.005)
+    assert z.delay_s == pytest.approx(truth.delay_s, abs=0.005)
+    assert xy.gain == pytest.approx(truth.gain_xy, rel=0.02)
+    assert z.gain == pytest.approx(truth.gain_z, rel=0.02)
+    assert xy.drag_1_s == pytest.approx(truth.drag_xy_1_s, rel=0.03)
+    assert z.drag_1_s == pytest.approx(truth.drag_z_1_s, rel=0.03)
+    assert xy.bias_m_s2 == pytest.approx(truth.bias_enu_m_s2[:2], abs=0.02)
+    assert z.bias_m_s2 == pytest.approx(truth.bias_enu_m_s2[2:], abs=0.02)
+    assert xy.r2 > 0.999 and z.r2 > 0.999 and xy.nrmse < 0.05
+
+
+def test_a_different_vehicle_gives_different_values(tmp_path) -> None:
+    # the fit follows the data (not a default): a slow, draggy vehicle
+    truth = replace(Truth(), lag_xy_s=0.3, drag_xy_1_s=1.2, gain_xy=0.7)
+    ident = identify(load_log(write_tlog(tmp_path / "slow.tlog", truth, seed=3)).segments)
+    assert ident.xy.rise_63_s == pytest.approx(truth.lag_xy_s + truth.delay_s, rel=0.08)
+    assert ident.xy.drag_1_s == pytest.approx(1.2, rel=0.05)
+    assert ident.xy.gain == pytest.approx(0.7, rel=0.05)
+
+
+def test_samples_before_offboard_are_not_used(tmp_path) -> None:
+    path = write_tlog(tmp_path / "late.tlog", duration_s=20.0, offboard_from_s=8.0)
+    log = load_log(path)
+    assert len(log.segments) == 1
+    assert log.segments[0].time_s[0] >= 8.0
+    assert log.duration_s == pytest.approx(12.0, abs=0.3)
+
+
+def test_vehicle_model_keeps_each_groups_rise() -> None:
+    from pf_offboard.identify.fit import AxisFit, Identification
+
+    def fit(group: str, lag: float, delay: float) -> AxisFit:
+        return AxisFit(group, lag, delay, 1.0, 0.5, (0.0,), 0.99, 0.1, 100, 1.0)
+
+    ident = Identification(fit("xy", 0.15, 0.05), fit("z", 0.02, 0.01), None, 20.0, ())
+    m = ident.vehicle_model()
+    assert m.accel_delay_s == pytest.approx(0.01)
+    assert m.accel_lag_xy_s == pytest.approx(0.19)
+    assert m.accel_lag_z_s == pytest.approx(0.02)
+    # negative drag (not resolved) is written as 0, never as an invalid section
+    ident2 = Identification(replace(fit("xy", 0.1, 0.0), drag_1_s=-0.05), fit("z", 0.0, 0.0), None, 20.0, ())
+    assert ident2.vehicle_model().drag_xy_1_s == 0.0
+
+
+def test_lag_and_delay_filters() -> None:
+    dt = 0.01
+    u = np.zeros((100, 1))
+    u[10:] = 1.0
+    y = lagged(u, dt, 0.1)
+    # 63 % one time constant after the step (exact discretisation of a held step)
+    assert y[20, 0] == pytest.approx(1.0 - np.exp(-1.0), abs=1e-9)
+    assert y[10, 0] == 0.0  # the step is applied from t_10 on: nothing yet at t_10
+    assert lagged(u, dt, 0.0) is u
+    # the interval integrals add up to the exact integral of the continuous response
+    inc = lag_increments(u, dt, 0.1)
+    t_end = 0.9  # from the step at 0.1 s to 1.0 s
+    assert inc.sum() == pytest.approx(t_end - 0.1 * (1.0 - np.exp(-t_end / 0.1)), abs=1e-12)
+    d = delayed(u, dt, 0.025)  # the step moves to t = 0.125 s: interval [0.12, 0.13) is half on
+    assert d[11, 0] == 0.0 and d[12, 0] == pytest.approx(0.5) and d[13, 0] == 1.0
