@@ -289,7 +289,7 @@ def _vehicle(data: Any) -> VehicleModel:
     vals = {}
     for name in names:
         lo, hi = (0.2, 5.0) if name.startswith("accel_gain") else (0.0, 10.0)
-        vals[name] = _number(d, name, f"vehicle.{name}", getattr(default, name), lo, hi)
+        vals[name] = _number(d, name, f"vehicle.{name}", getattr(default, name), lo, hi, nullable=name == "accel_delay_z_s")
     try:
         return VehicleModel(**vals)  # type: ignore[arg-type]
     except InputError as exc:

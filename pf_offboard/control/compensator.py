@@ -61,14 +61,15 @@ class InnerLoopCompensator:
             raise InputError("max_disturbance_m_s2", f"must be >= 0, got {max_disturbance_m_s2!r}")
         self.model = model
         self.delay_s = model.accel_delay_s
+        self.delay_z_s = model.accel_delay_s if model.accel_delay_z_s is None else model.accel_delay_z_s
         self.lag: Vec = (model.accel_lag_xy_s, model.accel_lag_xy_s, model.accel_lag_z_s)
-        self.horizon_s = model.accel_delay_s + model.accel_lag_xy_s
-        self.horizon_z_s = model.accel_delay_s + model.accel_lag_z_s
+        self.horizon_s = self.delay_s + model.accel_lag_xy_s
+        self.horizon_z_s = self.delay_z_s + model.accel_lag_z_s
         self.gain: Vec = (model.accel_gain_xy, model.accel_gain_xy, model.accel_gain_z)
         self.drag: Vec = (model.drag_xy_1_s, model.drag_xy_1_s, model.drag_z_1_s)
         self.observer_rad_s = float(observer_rad_s)
         self.max_disturbance_m_s2 = float(max_disturbance_m_s2)
-        self._history_s = max(self.horizon_s, self.horizon_z_s) + MAX_GAP_S
+        self._history_s = max(self.delay_s, self.delay_z_s) + MAX_GAP_S
         for name, value in (("speed_integral_rad_s", speed_integral_rad_s), ("offset_integral_rad_s", offset_integral_rad_s),
                             ("max_speed_offset_m_s", max_speed_offset_m_s), ("max_position_offset_m", max_position_offset_m)):
             if not (math.isfinite(value) and 0.0 <= value <= 100.0):
@@ -112,10 +113,9 @@ class InnerLoopCompensator:
         self.xi1_offset_m = min(pmax, max(-pmax, self.xi1_offset_m + kx * xi1_m))
         self.phi1_offset_m = min(pmax, max(-pmax, self.phi1_offset_m + kx * phi1_m))
 
-    def _pieces(self, t0: float, t1: float) -> list[tuple[float, Vec]]:
+    def _pieces(self, t0: float, t1: float, delay: float) -> list[tuple[float, Vec]]:
         """Setpoints acting on the vehicle over (t0, t1] as (duration_s, a_sp ENU) pieces: the one
         sent at s acts from s + delay on (zero-order hold; before any setpoint: hover, 0)."""
-        delay = self.delay_s
         cur: Vec = _ZERO
         out: list[tuple[float, Vec]] = []
         tau = t0
@@ -131,12 +131,22 @@ class InnerLoopCompensator:
         out.append((t1 - tau, cur))
         return out
 
-    def _advance(self, a_f: list[float], v: list[float], p: list[float], pieces: list[tuple[float, Vec]]) -> None:
-        """Integrate the model (lag filter a_f, velocity, position; in place) over the pieces."""
+    def _advance(
+        self, a_f: list[float], v: list[float], p: list[float], t0: float, t1: float, t1_z: float | None = None
+    ) -> None:
+        """Integrate the model (lag filter a_f, velocity, position; in place) from t0 to t1 (x, y)
+        and to t1_z (z; default t1), with the setpoints acting then."""
+        groups = ((self._pieces(t0, t1, self.delay_s), (0, 1)), (self._pieces(t0, t1 if t1_z is None else t1_z, self.delay_z_s), (2,)))
+        for pieces, axes in groups:
+            self._advance_axes(a_f, v, p, pieces, axes)
+
+    def _advance_axes(
+        self, a_f: list[float], v: list[float], p: list[float], pieces: list[tuple[float, Vec]], axes: tuple[int, ...]
+    ) -> None:
         for h, u_sp in pieces:
             if h <= 0.0:
                 continue
-            for i in range(3):
+            for i in axes:
                 u = self.gain[i] * u_sp[i]
                 lag = self.lag[i]
                 if lag > 0.0:
@@ -162,7 +172,7 @@ class InnerLoopCompensator:
             return self._extrapolate(time_s, position, velocity)
         dt = time_s - t_prev
         a_f, vh, ph = list(self._a_f), list(self._v_hat), [0.0, 0.0, 0.0]
-        self._advance(a_f, vh, ph, self._pieces(t_prev, time_s))
+        self._advance(a_f, vh, ph, t_prev, time_s)
         w = self.observer_rad_s
         l1, l2 = 2.0 * w * dt, w * w * dt
         dmax = self.max_disturbance_m_s2
@@ -183,10 +193,10 @@ class InnerLoopCompensator:
         ``t + delay``, when the setpoint computed now starts to act. The lag is not predicted
         past that: it stays part of the plant the law's gains must respect (predicting it too,
         with the last setpoint held, over-predicted and excited oscillations in simulation)."""
-        if self.delay_s <= 0.0:
+        if self.delay_s <= 0.0 and self.delay_z_s <= 0.0:
             return position, velocity
         a_f, v, p = list(self._a_f), list(velocity), list(position)
-        self._advance(a_f, v, p, self._pieces(time_s, time_s + self.delay_s))
+        self._advance(a_f, v, p, time_s, time_s + self.delay_s, time_s + self.delay_z_s)
         return (p[0], p[1], p[2]), (v[0], v[1], v[2])
 
     def invert(self, time_s: float, accel: Vec, velocity_pred: Vec) -> Vec:

@@ -142,7 +142,8 @@ class Limits:
 class VehicleModel:
     """Identified response of the vehicle + autopilot inner loops to an acceleration setpoint.
 
-    Per axis group (horizontal x/y, vertical z), world frame, velocity v and wind w:
+    Per axis group (horizontal x/y, vertical z; the vertical dead time is ``accel_delay_z_s`` when
+    given, else ``accel_delay_s``), world frame, velocity v and wind w:
     ``dv/dt = a + d``, ``a(s) = gain * exp(-delay s) / (lag s + 1) * a_sp(s) - drag * (v - w)``
     (``d``: what the model does not explain, estimated by the disturbance observer).
     ``rate_time_constant_s``: the autopilot's closed body-rate loop (first-order), used by the
@@ -158,6 +159,7 @@ class VehicleModel:
     drag_xy_1_s: float = 0.0
     drag_z_1_s: float = 0.0
     rate_time_constant_s: float = 0.0
+    accel_delay_z_s: float | None = None  # vertical dead time if it differs (None: accel_delay_s)
 
     @classmethod
     def typical(cls) -> VehicleModel:
@@ -176,6 +178,8 @@ class VehicleModel:
             "drag_z_1_s": (0.0, 10.0),
             "rate_time_constant_s": (0.0, 1.0),
         }
+        if self.accel_delay_z_s is not None:
+            bounds["accel_delay_z_s"] = (0.0, 1.0)
         for name, (lo, hi) in bounds.items():
             v = _finite(f"vehicle.{name}", getattr(self, name))
             if not lo <= v <= hi:

@@ -103,11 +103,6 @@ class Identification:
         return VehicleModel(**model_fields(self))
 
 
-def common_delay_s(ident: Identification) -> float:
-    """The one delay VehicleModel holds: the smaller group delay (the other's excess goes to its lag)."""
-    return min(ident.xy.delay_s, ident.z.delay_s)
-
-
 def model_fields(ident: Identification) -> dict[str, float]:
     """VehicleModel's field values from a fit, clamped to VehicleModel's bounds, rounded.
 
@@ -116,11 +111,11 @@ def model_fields(ident: Identification) -> dict[str, float]:
     def clamp(v: float, lo: float, hi: float, nd: int = 3) -> float:
         return round(min(max(v, lo), hi), nd)
 
-    delay = common_delay_s(ident)
     return {
-        "accel_lag_xy_s": clamp(ident.xy.rise_63_s - delay, 0.0, 2.0),
-        "accel_lag_z_s": clamp(ident.z.rise_63_s - delay, 0.0, 2.0),
-        "accel_delay_s": clamp(delay, 0.0, 1.0),
+        "accel_lag_xy_s": clamp(ident.xy.lag_s, 0.0, 2.0),
+        "accel_lag_z_s": clamp(ident.z.lag_s, 0.0, 2.0),
+        "accel_delay_s": clamp(ident.xy.delay_s, 0.0, 1.0),
+        "accel_delay_z_s": clamp(ident.z.delay_s, 0.0, 1.0),
         "accel_gain_xy": clamp(ident.xy.gain, 0.2, 5.0),
         "accel_gain_z": clamp(ident.z.gain, 0.2, 5.0),
         "drag_xy_1_s": clamp(ident.xy.drag_1_s, 0.0, 10.0),

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from pf_offboard.errors import InputError
-from pf_offboard.identify.fit import AxisFit, Identification, common_delay_s, model_fields
+from pf_offboard.identify.fit import AxisFit, Identification, model_fields
 from pf_offboard.identify.logdata import LogData
 
 
@@ -32,9 +32,6 @@ def report_lines(ident: Identification, logs: Sequence[LogData]) -> list[str]:
     if "rates" in kinds:
         lines.append("note: rates-mode log: the acceleration setpoint uses the measured attitude, so the xy lag/delay describe the thrust path only, not the attitude loop")
     lines.extend(f"note: {n}" for n in ident.notes)
-    d = common_delay_s(ident)
-    if abs(ident.xy.delay_s - ident.z.delay_s) > 1e-9:
-        lines.append(f"vehicle: accel_delay_s is the smaller group delay ({d:.3f} s); the other group's extra delay is added to its lag (63 % rise kept)")
     return lines
 
 

@@ -64,8 +64,9 @@ def test_vehicle_model_keeps_each_groups_rise() -> None:
 
     ident = Identification(fit("xy", 0.15, 0.05), fit("z", 0.02, 0.01), None, 20.0, ())
     m = ident.vehicle_model()
-    assert m.accel_delay_s == pytest.approx(0.01)
-    assert m.accel_lag_xy_s == pytest.approx(0.19)
+    # each group keeps its own (lag, delay): the compensator predicts each delay
+    assert m.accel_delay_s == pytest.approx(0.05) and m.accel_delay_z_s == pytest.approx(0.01)
+    assert m.accel_lag_xy_s == pytest.approx(0.15)
     assert m.accel_lag_z_s == pytest.approx(0.02)
     # negative drag (not resolved) is written as 0, never as an invalid section
     ident2 = Identification(replace(fit("xy", 0.1, 0.0), drag_1_s=-0.05), fit("z", 0.0, 0.0), None, 20.0, ())
