@@ -319,6 +319,7 @@ def _safety(data: Any) -> SafetyConfig:
         max_tilt_deg=num("max_tilt_deg", 0.0, 90.0, lo_open=True),
         max_body_rate_rad_s=num("max_body_rate_rad_s", 0.0, 100.0, lo_open=True),
         max_attitude_error_deg=num("max_attitude_error_deg", 0.0, 180.0, lo_open=True),
+        attitude_error_time_s=num("attitude_error_time_s", 0.0, 60.0),
         max_descent_speed_m_s=num("max_descent_speed_m_s", 0.0, 100.0, lo_open=True),
         no_progress_s=num("no_progress_s", 0.0, 3600.0, lo_open=True),
         min_progress_m=num("min_progress_m", 0.0, 1e4, lo_open=True),

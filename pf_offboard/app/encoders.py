@@ -262,6 +262,27 @@ class Encoder:
         msg = self._attitude_msg(time_boot_ms, ATTITUDE_IGNORE, np.array([1.0, 0, 0, 0]), sent, self.hover_thrust, ned=True)
         return Encoded(msg, self.hover_thrust, sent, reason or "hold")
 
+    def safe(self, yaw_enu_rad: float, time_boot_ms: int, reason: str = "safe") -> Encoded:
+        """A setpoint that is safe to hold with no fresh state: it depends on no measurement, so
+        the autopilot closes every loop on its own estimate, however long it keeps it (ArduPilot:
+        GUID_TIMEOUT) and however stale our state is. Never body rates (open loop).
+
+        acceleration: zero acceleration (PX4: level at its own hover thrust), and where the
+        profile takes a velocity target (ArduPilot) a zero one, so it brakes to a stop;
+        attitude / rates: level attitude quaternion at ``yaw_enu_rad``, hover thrust.
+        """
+        yaw = yaw_enu_rad if math.isfinite(yaw_enu_rad) else 0.0
+        if self.output_mode == "acceleration":
+            mask = TYPE_MASK_VEL_ACCEL_YAW_YAWRATE if self.profile.accel_with_velocity else TYPE_MASK_ACCEL_YAW_YAWRATE
+            msg = mavlink2.MAVLink_set_position_target_local_ned_message(
+                time_boot_ms, self.target_system, self.target_component, MAV_FRAME_LOCAL_NED,
+                mask, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, frames.yaw_enu_to_ned(yaw), 0.0,
+            )  # fmt: skip
+            return Encoded(msg, math.nan, None, reason)
+        mask = _ROLL_RATE_IGNORE | _PITCH_RATE_IGNORE | _YAW_RATE_IGNORE_ATT
+        msg = self._attitude_msg(time_boot_ms, mask, level_attitude(yaw), (0.0, 0.0, 0.0), self.hover_thrust)
+        return Encoded(msg, self.hover_thrust, None, reason)
+
     def idle(self, est: StateEstimate, time_boot_ms: int) -> Encoded:
         """Zero-thrust, level attitude setpoint (proof of life while waiting for a throw)."""
         yaw = yaw_of(est.q_enu_flu) if est.q_enu_flu is not None else 0.0

@@ -50,7 +50,8 @@ class SafetyConfig:
     max_path_distance_m: float = 3.0
     max_tilt_deg: float = 60.0  # measured, and commanded (attitude setpoints)
     max_body_rate_rad_s: float = 10.0  # any axis of a body-rate setpoint
-    max_attitude_error_deg: float = 35.0  # rates mode: measured vs commanded attitude (own loop diverging)
+    max_attitude_error_deg: float = 35.0  # rates mode: measured vs commanded thrust axis (own loop diverging) ...
+    attitude_error_time_s: float = 0.5  # ... for longer than this (a step demand at activation is transient)
     max_descent_speed_m_s: float = 5.0  # falling faster than this while following: motors lost / crash
     no_progress_s: float = 5.0  # while following: neither along-path progress nor approach for this long
     min_progress_m: float = 0.5
@@ -141,10 +142,17 @@ def tilt_rad(q_enu_flu: ArrayLike) -> float:
     return math.acos(max(-1.0, min(1.0, zz)))
 
 
-def attitude_error_rad(q_a: ArrayLike, q_b: ArrayLike) -> float:
-    """Smallest rotation angle between two unit quaternions."""
-    d = abs(float(np.dot(np.asarray(q_a, dtype=float), np.asarray(q_b, dtype=float))))
-    return 2.0 * math.acos(min(1.0, d))
+def _body_z(q: ArrayLike) -> tuple[float, float, float]:
+    w, x, y, z = (float(v) for v in np.asarray(q, dtype=float))
+    return (2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y))
+
+
+def thrust_axis_error_rad(q_a: ArrayLike, q_b: ArrayLike) -> float:
+    """Angle between the thrust (body z) axes of two attitudes. Yaw is left out on purpose: a
+    large heading error is harmless (and normal when following starts), a thrust axis far from
+    the commanded one is the vehicle going somewhere else."""
+    a, b = _body_z(q_a), _body_z(q_b)
+    return math.acos(max(-1.0, min(1.0, a[0] * b[0] + a[1] * b[1] + a[2] * b[2])))
 
 
 class Breach(enum.Enum):
@@ -217,6 +225,7 @@ class EnvelopeMonitor:
         self._window_eta1_m = math.nan
         self._window_best_cross_m = math.inf
         self.max_tilt_seen_rad = 0.0
+        self._attitude_error_since_s: float | None = None
 
     # ------------------------------------------------------------------ activation
     def check_activation(self, sample: VehicleSample) -> Verdict:
@@ -256,11 +265,16 @@ class EnvelopeMonitor:
             if math.degrees(tilt) > cfg.max_tilt_deg:
                 return Verdict(Breach.TILT, f"measured tilt {math.degrees(tilt):.0f} deg > safety.max_tilt_deg {cfg.max_tilt_deg:g}")
             if following and sample.q_cmd_enu_flu is not None:
-                err = math.degrees(attitude_error_rad(sample.q_enu_flu, sample.q_cmd_enu_flu))
-                if err > cfg.max_attitude_error_deg:
+                err = math.degrees(thrust_axis_error_rad(sample.q_enu_flu, sample.q_cmd_enu_flu))
+                if err <= cfg.max_attitude_error_deg:
+                    self._attitude_error_since_s = None
+                elif self._attitude_error_since_s is None:
+                    self._attitude_error_since_s = sample.time_s
+                elif sample.time_s - self._attitude_error_since_s > cfg.attitude_error_time_s:
                     return Verdict(
                         Breach.ATTITUDE_ERROR,
-                        f"attitude {err:.0f} deg off the commanded one (safety.max_attitude_error_deg {cfg.max_attitude_error_deg:g}): the attitude loop is diverging",
+                        f"thrust axis {err:.0f} deg off the commanded one for {sample.time_s - self._attitude_error_since_s:.2f} s "
+                        f"(safety.max_attitude_error_deg {cfg.max_attitude_error_deg:g}): the attitude loop is diverging",
                     )
         if not following:
             return OK
@@ -300,6 +314,20 @@ class EnvelopeMonitor:
             )
         return OK
 
+    def bound_rates(self, rates_frd_rad_s: Sequence[float]) -> tuple[tuple[float, float, float], bool]:
+        """Body rates scaled down (same axis) so no component exceeds ``max_body_rate_rad_s``.
+
+        A saturation, not a breach: the app's attitude loop asks for large rates for a moment at
+        activation (a step in the demanded attitude, a large yaw error); what leaves is bounded.
+        Returns (rates, True if they were scaled)."""
+        r = tuple(float(v) for v in rates_frd_rad_s)
+        peak = max(abs(v) for v in r)
+        limit = self.config.max_body_rate_rad_s
+        if not self.config.enabled or not peak > limit:
+            return (r[0], r[1], r[2]), False
+        k = limit / peak
+        return (r[0] * k, r[1] * k, r[2] * k), True
+
     # ------------------------------------------------------------------ every setpoint, before it is sent
     def check_setpoint(
         self,
@@ -325,8 +353,8 @@ class EnvelopeMonitor:
                 return Verdict(Breach.SETPOINT, f"acceleration setpoint tilts {tilt:.0f} deg > safety.max_tilt_deg {cfg.max_tilt_deg:g}: not sent")
         if rates_frd_rad_s is not None:
             peak = max(abs(float(r)) for r in rates_frd_rad_s)
-            if peak > cfg.max_body_rate_rad_s:
-                return Verdict(Breach.BODY_RATE, f"body-rate setpoint {peak:.1f} rad/s > safety.max_body_rate_rad_s {cfg.max_body_rate_rad_s:g}: not sent")
+            if not math.isfinite(peak):
+                return Verdict(Breach.BODY_RATE, "body-rate setpoint not finite: not sent")
         if position_target_enu_m is not None:
             why = self.fence.violation(position_target_enu_m)
             if why:
