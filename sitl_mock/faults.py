@@ -29,10 +29,17 @@ class FaultInjector:
         window = self.config.blackout_s
         return window is not None and window[0] <= now_s < window[1]
 
+    def heartbeat_muted(self, data: bytes, now_s: float) -> bool:
+        """A HEARTBEAT (MAVLink 2 message id 0, bytes 7..9 of the frame) inside the mute window."""
+        window = self.config.heartbeat_mute_s
+        if window is None or not window[0] <= now_s < window[1]:
+            return False
+        return len(data) > 10 and data[0] == 0xFD and data[7:10] == b"\x00\x00\x00"
+
     def outgoing(self, data: bytes, now_s: float) -> list[tuple[float, bytes]]:
         """(release time, bytes) for each copy to send; empty if the datagram is lost."""
         cfg = self.config
-        if self.in_blackout(now_s):
+        if self.in_blackout(now_s) or self.heartbeat_muted(data, now_s):
             self.dropped_out += 1
             return []
         if cfg.loss > 0.0 and self.rng.random() < cfg.loss:
