@@ -16,6 +16,7 @@ import struct
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
@@ -154,6 +155,7 @@ class Autopilot:
         if f.motor_failure_at_s is not None:
             self._pending.append((f.motor_failure_at_s, "motor_failure", None))
         self.motors_failed = False  # a motor failure: no thrust whatever the mode (the vehicle falls)
+        self.fault_injector: Any = None  # set by the server: told when OFFBOARD / GUIDED is first entered
 
     # ------------------------------------------------------------------------------------------
     # Derived state
@@ -596,6 +598,8 @@ class Autopilot:
             self.log.append(LogEvent(self.time_s, f"mode {self.mode.name} -> {spec.name}"))
         previous = self.mode
         self.mode = spec
+        if spec.behaviour is Behaviour.OFFBOARD and self.fault_injector is not None:
+            self.fault_injector.start_windows(self.time_s)
         if spec != previous or spec.behaviour is not Behaviour.OFFBOARD:
             self._enter(spec)
 

@@ -99,6 +99,9 @@ class FaultConfig:
     motor_failure_at_s: float | None = None
     mode_refused_s: tuple[float, float] | None = None  # DO_SET_MODE refused for t in [t0, t1)
     heartbeat_mute_s: tuple[float, float] | None = None  # no HEARTBEAT sent for t in [t0, t1)
+    # blackout_s / heartbeat_mute_s count from the first entry into OFFBOARD / GUIDED instead of
+    # boot (a test's fault then falls inside the flight however long the client took to start)
+    windows_from_offboard: bool = False
 
     def validate(self) -> None:
         for name in ("loss", "duplicate", "corrupt"):

@@ -158,6 +158,8 @@ class FlyOutcome:
     records: list[Any]
     summary: Any | None
     activation_time_s: float | None
+    breach: Any | None = None  # pf_offboard.safety.Verdict when the envelope ended the flight
+    breach_time_s: float | None = None  # vehicle time it was detected
 
 
 def run(args: argparse.Namespace) -> int:
@@ -299,7 +301,8 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     records = read_steplog(log.paths.steps_csv)
     summary = summarize(records) if records else None
     _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
-    return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s)
+    return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s,
+                      result.breach, result.breach_time_s)  # fmt: skip
 
 
 def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[type-arg]

@@ -41,11 +41,14 @@ def lockstep(profile: str, spawn: str, **faults: object) -> MockConfig:
                       lockstep=True, lockstep_dt_s=1.0 / RATE_HZ, faults=FaultConfig(**faults))  # fmt: skip
 
 
-def real_time(profile: str, spawn: str, truth_log: Path, **faults: object) -> MockConfig:
-    """The vehicle on its own clock (real time): a blackout can only be modelled this way, since a
-    lockstep vehicle stops with the link (it advances only on the setpoints it receives)."""
+def own_clock(profile: str, spawn: str, truth_log: Path, speed: float = 0.5, **faults: object) -> MockConfig:
+    """The vehicle on its own clock: a blackout can only be modelled this way, since a lockstep
+    vehicle stops with the link (it advances only on the setpoints it receives). At half real
+    speed by default: on a loaded CI machine the app's wall-clock latency then costs half as much
+    vehicle time, so the flight itself does not depend on the load (the app's wall-clock timeouts
+    are then twice as short in vehicle time, which only makes the fault shorter for the old code)."""
     return MockConfig(profile=profile, spawn=SpawnSpec.parse(spawn), udp_local_port=0, udp_remote=None,
-                      truth_log=str(truth_log), faults=FaultConfig(**faults))  # fmt: skip
+                      speed=speed, truth_log=str(truth_log), faults=FaultConfig(**faults))  # fmt: skip
 
 
 def hover(ned: tuple[float, float, float] = HOVER_NED) -> str:
