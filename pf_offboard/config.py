@@ -325,6 +325,7 @@ def _safety(data: Any) -> SafetyConfig:
         min_progress_m=num("min_progress_m", 0.0, 1e4, lo_open=True),
         safe_mode_timeout_s=num("safe_mode_timeout_s", 0.0, 600.0, lo_open=True),
         heartbeat_timeout_s=num("heartbeat_timeout_s", 0.0, 60.0, lo_open=True),
+        tilt_lookahead_s=num("tilt_lookahead_s", 0.0, 2.0),
     )
 
 

@@ -252,8 +252,11 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             # telemetry at the rates we need: state at the setpoint rate (a fresh sample drives
             # each setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s where honoured.
             state_id = mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED if args.state_source == "local_position" else mavlink2.MAVLINK_MSG_ID_ODOMETRY
-            for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
-                bridge.request_interval(msg_id, rate)
+            # each request three times: idempotent, and a lossy link must not leave HEARTBEAT at 1 Hz
+            # (the lost-HEARTBEAT watchdog counts on it)
+            for _ in range(3):
+                for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
+                    bridge.request_interval(msg_id, rate)
             if settings.hover_thrust is None and settings.output_mode != "acceleration":
                 hover = await bridge.read_param(profile.hover_thrust_param)
                 if not 0.05 <= hover <= 0.95:

@@ -49,14 +49,15 @@ class SafetyConfig:
     max_path_distance_at_activation_m: float = 3.0
     max_path_distance_m: float = 3.0
     max_tilt_deg: float = 60.0  # measured, and commanded (attitude setpoints)
-    max_body_rate_rad_s: float = 10.0  # any axis of a body-rate setpoint
+    max_body_rate_rad_s: float = 4.0  # body-rate setpoints: roll/pitch pair and yaw (PX4 MC_ROLLRATE_MAX 220 deg/s)
     max_attitude_error_deg: float = 35.0  # rates mode: measured vs commanded thrust axis (own loop diverging) ...
     attitude_error_time_s: float = 0.5  # ... for longer than this (a step demand at activation is transient)
     max_descent_speed_m_s: float = 5.0  # falling faster than this while following: motors lost / crash
     no_progress_s: float = 5.0  # while following: neither along-path progress nor approach for this long
     min_progress_m: float = 0.5
     safe_mode_timeout_s: float = 10.0  # retry the hold/land request until confirmed, at most this long
-    heartbeat_timeout_s: float = 1.5  # no autopilot HEARTBEAT for this long: mode unknown, stop commanding
+    heartbeat_timeout_s: float = 3.0  # no autopilot HEARTBEAT for this long: mode unknown, stop commanding
+    tilt_lookahead_s: float = 0.15  # measured tilt extrapolated this far ahead (telemetry lags the vehicle)
 
 
 @dataclass(frozen=True)
@@ -226,6 +227,7 @@ class EnvelopeMonitor:
         self._window_best_cross_m = math.inf
         self.max_tilt_seen_rad = 0.0
         self._attitude_error_since_s: float | None = None
+        self._last_tilt: tuple[float, float] | None = None  # (time_s, tilt_rad) of the previous sample
 
     # ------------------------------------------------------------------ activation
     def check_activation(self, sample: VehicleSample) -> Verdict:
@@ -264,6 +266,19 @@ class EnvelopeMonitor:
             self.max_tilt_seen_rad = max(self.max_tilt_seen_rad, tilt)
             if math.degrees(tilt) > cfg.max_tilt_deg:
                 return Verdict(Breach.TILT, f"measured tilt {math.degrees(tilt):.0f} deg > safety.max_tilt_deg {cfg.max_tilt_deg:g}")
+            # Telemetry lags the vehicle and a level command takes a moment to stop a rotation: a
+            # tilt growing fast enough to pass the limit within the look-ahead is a breach now.
+            rate = 0.0
+            if self._last_tilt is not None and sample.time_s > self._last_tilt[0]:
+                rate = (tilt - self._last_tilt[1]) / (sample.time_s - self._last_tilt[0])
+            self._last_tilt = (sample.time_s, tilt)
+            ahead = math.degrees(tilt + max(rate, 0.0) * cfg.tilt_lookahead_s)
+            if ahead > cfg.max_tilt_deg:
+                return Verdict(
+                    Breach.TILT,
+                    f"measured tilt {math.degrees(tilt):.0f} deg growing at {math.degrees(rate):.0f} deg/s: past safety.max_tilt_deg "
+                    f"{cfg.max_tilt_deg:g} within {cfg.tilt_lookahead_s:g} s",
+                )
             if following and sample.q_cmd_enu_flu is not None:
                 err = math.degrees(thrust_axis_error_rad(sample.q_enu_flu, sample.q_cmd_enu_flu))
                 if err <= cfg.max_attitude_error_deg:
@@ -315,18 +330,21 @@ class EnvelopeMonitor:
         return OK
 
     def bound_rates(self, rates_frd_rad_s: Sequence[float]) -> tuple[tuple[float, float, float], bool]:
-        """Body rates scaled down (same axis) so no component exceeds ``max_body_rate_rad_s``.
-
-        A saturation, not a breach: the app's attitude loop asks for large rates for a moment at
-        activation (a step in the demanded attitude, a large yaw error); what leaves is bounded.
-        Returns (rates, True if they were scaled)."""
-        r = tuple(float(v) for v in rates_frd_rad_s)
-        peak = max(abs(v) for v in r)
+        """Body rates bounded by ``max_body_rate_rad_s``: roll and pitch scaled together (the
+        tilting axis is kept), yaw clipped on its own (a large heading error at activation must not
+        slow the tilt). A saturation, not a breach: the app's attitude loop asks for large rates
+        for a moment at activation; what leaves is bounded, as the autopilot's own loops are.
+        Returns (rates, True if any was bounded)."""
+        p, q, r = (float(v) for v in rates_frd_rad_s)
         limit = self.config.max_body_rate_rad_s
-        if not self.config.enabled or not peak > limit:
-            return (r[0], r[1], r[2]), False
-        k = limit / peak
-        return (r[0] * k, r[1] * k, r[2] * k), True
+        if not self.config.enabled:
+            return (p, q, r), False
+        peak = max(abs(p), abs(q))
+        bounded = peak > limit or abs(r) > limit
+        if peak > limit:
+            p, q = p * limit / peak, q * limit / peak
+        r = max(-limit, min(limit, r))
+        return (p, q, r), bounded
 
     # ------------------------------------------------------------------ every setpoint, before it is sent
     def check_setpoint(

@@ -146,11 +146,24 @@ def test_setpoints_are_checked_before_they_leave() -> None:
     assert m.check_setpoint(rates_frd_rad_s=(math.nan, 0.0, 0.0)).kind is Breach.BODY_RATE
 
 
-def test_body_rates_are_bounded_along_the_same_axis() -> None:
+def test_body_rates_are_bounded_keeping_the_tilt_axis() -> None:
     m = monitor(max_body_rate_rad_s=4.0)
     assert m.bound_rates((1.0, -2.0, 3.0)) == ((1.0, -2.0, 3.0), False)
-    rates, scaled = m.bound_rates((2.0, -8.0, 4.0))
-    assert scaled and rates == pytest.approx((1.0, -4.0, 2.0))
+    rates, scaled = m.bound_rates((2.0, -8.0, 1.0))
+    assert scaled and rates == pytest.approx((1.0, -4.0, 1.0))  # roll/pitch scaled together
+    rates, scaled = m.bound_rates((1.0, 0.5, -9.0))
+    assert scaled and rates == pytest.approx((1.0, 0.5, -4.0))  # yaw clipped alone
+
+
+def test_a_fast_growing_tilt_breaches_before_the_limit() -> None:
+    m = monitor(max_tilt_deg=60.0, tilt_lookahead_s=0.15)
+    assert not m.check_state(sample(t=0.0, q=about_x(20.0))).breach
+    assert not m.check_state(sample(t=0.1, q=about_x(30.0))).breach  # 100 deg/s: 45 deg ahead
+    verdict = m.check_state(sample(t=0.14, q=about_x(42.0)))  # 300 deg/s: 87 deg ahead
+    assert verdict.kind is Breach.TILT and "growing at 300 deg/s" in verdict.reason
+    steady = monitor(max_tilt_deg=60.0)
+    for i in range(10):  # a steady 55 deg is inside
+        assert not steady.check_state(sample(t=0.01 * i, q=about_x(55.0))).breach
 
 
 def test_tilt_of_a_quaternion() -> None:
