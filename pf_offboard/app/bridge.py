@@ -446,6 +446,8 @@ class Bridge:
             eta1_m=float(cmd.state.eta1) if cmd is not None else None,
             # our own attitude loop is judged only once the vehicle flies it (not while engaging)
             q_cmd_enu_flu=np.asarray(cmd.attitude, dtype=float) if (cmd is not None and rates and self.phase is Phase.FOLLOWING) else None,
+            rates_flu_rad_s=est.rates_flu_rad_s,
+            q_demand_enu_flu=np.asarray(cmd.attitude, dtype=float) if cmd is not None else None,
         )
 
     def _check(self, step: Step) -> Verdict:

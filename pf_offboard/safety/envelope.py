@@ -57,7 +57,7 @@ class SafetyConfig:
     min_progress_m: float = 0.5
     safe_mode_timeout_s: float = 10.0  # retry the hold/land request until confirmed, at most this long
     heartbeat_timeout_s: float = 3.0  # no autopilot HEARTBEAT for this long: mode unknown, stop commanding
-    tilt_lookahead_s: float = 0.15  # measured tilt extrapolated this far ahead (telemetry lags the vehicle)
+    tilt_lookahead_s: float = 0.1  # a tilt beyond the demanded one is extrapolated this far (telemetry lags)
 
 
 @dataclass(frozen=True)
@@ -143,6 +143,18 @@ def tilt_rad(q_enu_flu: ArrayLike) -> float:
     return math.acos(max(-1.0, min(1.0, zz)))
 
 
+def tilt_rate_rad_s(q_enu_flu: ArrayLike, rates_flu_rad_s: ArrayLike) -> float:
+    """d(tilt)/dt from an attitude and the body rates of the same sample (positive: tilting
+    further). With u = body z · world up, du/dt = R20·ω_y − R21·ω_x and tilt = acos(u)."""
+    w, x, y, z = (float(v) for v in np.asarray(q_enu_flu, dtype=float))
+    wx, wy = (float(v) for v in np.asarray(rates_flu_rad_s, dtype=float)[:2])
+    r20, r21 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x)
+    sin_tilt = math.sin(tilt_rad((w, x, y, z)))
+    if sin_tilt < 1e-3:
+        return math.hypot(wx, wy)  # level: any roll/pitch rate tilts it
+    return -(r20 * wy - r21 * wx) / sin_tilt
+
+
 def _body_z(q: ArrayLike) -> tuple[float, float, float]:
     w, x, y, z = (float(v) for v in np.asarray(q, dtype=float))
     return (2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y))
@@ -208,6 +220,8 @@ class VehicleSample:
     cross_track_m: float | None = None  # None: the controller gave none this step
     eta1_m: float | None = None
     q_cmd_enu_flu: NDArray[np.float64] | None = None  # rates mode: the attitude our own loop tracks
+    rates_flu_rad_s: NDArray[np.float64] | None = None  # measured body rates (same sample as the attitude)
+    q_demand_enu_flu: NDArray[np.float64] | None = None  # the core's demanded attitude (any output mode)
 
 
 class EnvelopeMonitor:
@@ -227,7 +241,6 @@ class EnvelopeMonitor:
         self._window_best_cross_m = math.inf
         self.max_tilt_seen_rad = 0.0
         self._attitude_error_since_s: float | None = None
-        self._last_tilt: tuple[float, float] | None = None  # (time_s, tilt_rad) of the previous sample
 
     # ------------------------------------------------------------------ activation
     def check_activation(self, sample: VehicleSample) -> Verdict:
@@ -267,13 +280,12 @@ class EnvelopeMonitor:
             if math.degrees(tilt) > cfg.max_tilt_deg:
                 return Verdict(Breach.TILT, f"measured tilt {math.degrees(tilt):.0f} deg > safety.max_tilt_deg {cfg.max_tilt_deg:g}")
             # Telemetry lags the vehicle and a level command takes a moment to stop a rotation: a
-            # tilt growing fast enough to pass the limit within the look-ahead is a breach now.
-            rate = 0.0
-            if self._last_tilt is not None and sample.time_s > self._last_tilt[0]:
-                rate = (tilt - self._last_tilt[1]) / (sample.time_s - self._last_tilt[0])
-            self._last_tilt = (sample.time_s, tilt)
+            # tilt already beyond the demanded one (overshooting, not a commanded manoeuvre) and
+            # growing fast enough to pass the limit within the look-ahead is a breach now.
+            rate = tilt_rate_rad_s(sample.q_enu_flu, sample.rates_flu_rad_s) if sample.rates_flu_rad_s is not None else 0.0
+            demanded = tilt_rad(sample.q_demand_enu_flu) if sample.q_demand_enu_flu is not None else 0.0
             ahead = math.degrees(tilt + max(rate, 0.0) * cfg.tilt_lookahead_s)
-            if ahead > cfg.max_tilt_deg:
+            if tilt > demanded and ahead > cfg.max_tilt_deg:
                 return Verdict(
                     Breach.TILT,
                     f"measured tilt {math.degrees(tilt):.0f} deg growing at {math.degrees(rate):.0f} deg/s: past safety.max_tilt_deg "

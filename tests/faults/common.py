@@ -77,6 +77,16 @@ def read_truth(path: Path) -> Truth:
                  [r["mode"] for r in rows], f("landed").astype(bool))  # fmt: skip
 
 
+def last_heartbeat_mode(log_dir: Path, profile: str) -> str:
+    """The mode in the vehicle's last HEARTBEAT (its own report: the truth log's last rows can miss
+    a mode change made in reply to our request just before the app exited and the mock stopped)."""
+    from pf_offboard.app.profiles import PROFILES
+
+    beats = [e.message for e in read_tlog(log_dir / "flight.tlog") if e.direction == "in"
+             and e.message.get_type() == "HEARTBEAT" and e.message.get_srcComponent() == 1]  # fmt: skip
+    return PROFILES[profile].mode_name(beats[-1].custom_mode)
+
+
 def outgoing(log_dir: Path) -> list:
     return [e.message for e in read_tlog(log_dir / "flight.tlog") if e.direction == "out"]
 

@@ -12,7 +12,7 @@ from sitl_mock.runner import spawn
 
 from tests.app.flights import run_fly
 
-from .common import entries, hover, is_mode_request, is_safe_setpoint, own_clock, read_truth, write_config
+from .common import last_heartbeat_mode, entries, hover, is_mode_request, is_safe_setpoint, own_clock, read_truth, write_config
 
 pytestmark = pytest.mark.integration
 
@@ -42,12 +42,12 @@ def test_blackout_in_rates_mode_stays_level_and_holds_height(tmp_path, profile: 
     height_lost = z_at_blackout - float(z_up[window].min())
     tilt = float(truth.tilt_deg[window].max())
     print(f"\n{profile} rates, blackout {t0:.2f}..{t1:.2f} s: max tilt {tilt:.1f} deg, height lost {height_lost:.3f} m; "
-          f"end mode {truth.mode[-1]}, armed {truth.armed[-1]}; app: {outcome.reason} (exit {outcome.exit_code})")  # fmt: skip
+          f"end mode {last_heartbeat_mode(tmp_path / 'log', profile)}, armed {truth.armed[-1]}; app: {outcome.reason} (exit {outcome.exit_code})")  # fmt: skip
     assert outcome.exit_code == 3, outcome.reason
     assert "state went stale" in outcome.reason and f"{hold} requested, confirmed" in outcome.reason
     assert tilt <= MAX_TILT_DEG
     assert height_lost <= 0.3
-    assert truth.mode[-1] == hold and truth.armed[-1] and not truth.landed[-1]
+    assert last_heartbeat_mode(tmp_path / "log", profile) == hold and truth.armed[-1] and not truth.landed[-1]
     assert "AUTO.RTL" not in truth.mode and "RTL" not in truth.mode
     # from the app's side: no body-rate setpoint left after the last state sample before the
     # blackout (beyond the one computed from it), only safe setpoints and the hold request

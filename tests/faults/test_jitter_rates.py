@@ -9,7 +9,7 @@ from sitl_mock.runner import spawn
 
 from tests.app.flights import run_fly
 
-from .common import hover, own_clock, read_truth, write_config
+from .common import last_heartbeat_mode, hover, own_clock, read_truth, write_config
 
 pytestmark = pytest.mark.integration
 
@@ -31,9 +31,9 @@ def test_jitter_in_rates_mode_flies_or_ends_safely(tmp_path, profile: str) -> No
     flown = truth.time_s >= truth.time_s[truth.mode.index(offboard)]
     tilt = float(truth.tilt_deg[flown].max())
     print(f"\n{profile} rates, 50 ms jitter: {outcome.reason} (exit {outcome.exit_code}); max tilt {tilt:.1f} deg; "
-          f"end {truth.mode[-1]}, armed {truth.armed[-1]}")  # fmt: skip
+          f"end {last_heartbeat_mode(tmp_path / 'log', profile)}, armed {truth.armed[-1]}")  # fmt: skip
     assert outcome.exit_code in (0, 3, 5), outcome.reason
     if outcome.exit_code != 0:  # ended early: by the envelope or the stale-state watchdog, safely
         assert f"{hold} requested, confirmed" in outcome.reason
-    assert truth.mode[-1] == hold and truth.armed[-1] and not truth.landed[-1]
+    assert last_heartbeat_mode(tmp_path / "log", profile) == hold and truth.armed[-1] and not truth.landed[-1]
     assert tilt <= MAX_TILT_DEG

@@ -12,7 +12,7 @@ from sitl_mock.runner import spawn
 
 from tests.app.flights import run_fly
 
-from .common import SETPOINT_TYPES, entries, hover, is_mode_request, is_safe_setpoint, own_clock, read_truth, write_config
+from .common import last_heartbeat_mode, SETPOINT_TYPES, entries, hover, is_mode_request, is_safe_setpoint, own_clock, read_truth, write_config
 
 pytestmark = pytest.mark.integration
 
@@ -33,11 +33,11 @@ def test_loss_and_blackout_end_in_the_requested_hold_not_rtl(tmp_path, seed: int
     log = entries(tmp_path / "log")
     requests = [e for e in log if e.direction == "out" and is_mode_request(e.message) and e.message.param2 == 4]
     print(f"\nseed {seed}: {outcome.reason} (exit {outcome.exit_code}); modes seen {sorted(set(truth.mode))}; "
-          f"end {truth.mode[-1]}; {len(requests)} hold requests; max speed after the blackout began "
+          f"end {last_heartbeat_mode(tmp_path / 'log', 'px4')}; {len(requests)} hold requests; max speed after the blackout began "
           f"{speed[during[1:]].max():.2f} m/s")  # fmt: skip
     assert outcome.exit_code == 3, outcome.reason
     assert "state went stale" in outcome.reason and "AUTO.LOITER requested, confirmed" in outcome.reason
-    assert truth.mode[-1] == "AUTO.LOITER" and truth.armed[-1]
+    assert last_heartbeat_mode(tmp_path / "log", "px4") == "AUTO.LOITER" and truth.armed[-1]
     assert "AUTO.RTL" not in truth.mode  # PX4's offboard-loss failsafe never fired
     assert speed[during[1:]].max() < 2.0  # nothing flown open loop
     # after the first hold request, only safe setpoints (and more hold requests) left

@@ -22,8 +22,8 @@ def about_x(angle_deg: float) -> np.ndarray:
 
 
 def sample(t: float = 0.0, pos=(1.0, 1.0, 2.5), vel=(0.0, 0.0, 0.0), q=LEVEL, armed: bool = True, landed=None,
-           cross: float | None = 0.1, eta1: float | None = 0.0, q_cmd=None) -> VehicleSample:  # fmt: skip
-    return VehicleSample(t, np.array(pos, float), np.array(vel, float), q, armed, landed, cross, eta1, q_cmd)
+           cross: float | None = 0.1, eta1: float | None = 0.0, q_cmd=None, rates=None, q_demand=None) -> VehicleSample:  # fmt: skip
+    return VehicleSample(t, np.array(pos, float), np.array(vel, float), q, armed, landed, cross, eta1, q_cmd, rates, q_demand)
 
 
 def monitor(**cfg: object) -> EnvelopeMonitor:
@@ -155,15 +155,26 @@ def test_body_rates_are_bounded_keeping_the_tilt_axis() -> None:
     assert scaled and rates == pytest.approx((1.0, 0.5, -4.0))  # yaw clipped alone
 
 
-def test_a_fast_growing_tilt_breaches_before_the_limit() -> None:
-    m = monitor(max_tilt_deg=60.0, tilt_lookahead_s=0.15)
-    assert not m.check_state(sample(t=0.0, q=about_x(20.0))).breach
-    assert not m.check_state(sample(t=0.1, q=about_x(30.0))).breach  # 100 deg/s: 45 deg ahead
-    verdict = m.check_state(sample(t=0.14, q=about_x(42.0)))  # 300 deg/s: 87 deg ahead
-    assert verdict.kind is Breach.TILT and "growing at 300 deg/s" in verdict.reason
-    steady = monitor(max_tilt_deg=60.0)
+def test_a_fast_growing_tilt_beyond_the_demand_breaches_before_the_limit() -> None:
+    m = monitor(max_tilt_deg=60.0, tilt_lookahead_s=0.1)
+    rolling = np.array([4.0, 0.0, 0.0])  # 229 deg/s about body x: tilting further
+    verdict = m.check_state(sample(q=about_x(40.0), rates=rolling, q_demand=about_x(30.0)))
+    assert verdict.kind is Breach.TILT and "growing at 229 deg/s" in verdict.reason  # 40 + 23 > 60
+    # the same motion towards a demanded 50 deg is a commanded manoeuvre, not an overshoot
+    assert not monitor().check_state(sample(q=about_x(40.0), rates=rolling, q_demand=about_x(50.0))).breach
+    # rolling back towards level is not tilting further
+    assert not monitor().check_state(sample(q=about_x(40.0), rates=-rolling, q_demand=about_x(0.0))).breach
     for i in range(10):  # a steady 55 deg is inside
-        assert not steady.check_state(sample(t=0.01 * i, q=about_x(55.0))).breach
+        assert not m.check_state(sample(t=0.01 * i, q=about_x(55.0), rates=np.zeros(3))).breach
+
+
+def test_tilt_rate_from_attitude_and_body_rates() -> None:
+    from pf_offboard.safety.envelope import tilt_rate_rad_s
+
+    assert tilt_rate_rad_s(about_x(30.0), (1.0, 0.0, 0.0)) == pytest.approx(1.0)
+    assert tilt_rate_rad_s(about_x(30.0), (-1.0, 0.0, 0.0)) == pytest.approx(-1.0)
+    assert tilt_rate_rad_s(about_x(30.0), (0.0, 1.0, 0.0)) == pytest.approx(0.0, abs=1e-12)  # sideways
+    assert tilt_rate_rad_s(LEVEL, (0.0, 2.0, 0.0)) == pytest.approx(2.0)
 
 
 def test_tilt_of_a_quaternion() -> None:
