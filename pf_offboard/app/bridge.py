@@ -278,7 +278,6 @@ class Bridge:
         self._safing: tuple[int, str, ModeRequest] | None = None
         self._safe_msg: Any = None
         self._activation_checked = False
-        self.rates_bounded = 0  # rates-mode setpoints scaled down to safety.max_body_rate_rad_s
         # before activation, stream the follower's own (inactive) setpoints as proof of life
         self._stream_follow_before_active = False
         if link.first_heartbeat is not None:  # mode and armed state known from the start
@@ -474,22 +473,13 @@ class Bridge:
 
     def _outgoing(self, step: Step) -> Any:
         """What actually leaves for an active step: in rates mode, the level hold (quaternion +
-        thrust) when the attitude is not fresh (rates would be flown open loop), and body rates
-        bounded by safety.max_body_rate_rad_s."""
+        thrust) when the attitude is not fresh (the rates would be flown open loop). (Body rates
+        are bounded by the encoder itself: safety.max_body_rate_rad_s.)"""
         if self.pipeline.encoder.output_mode != "rates" or step.encoded.rates_frd_rad_s is None:
             return step.setpoint
         if self.clock() - self._last_attitude_wall > KEEPALIVE_S:
             return self._safe_setpoint(step.estimate)
-        if self.monitor is None:
-            return step.setpoint
-        rates, scaled = self.monitor.bound_rates(step.encoded.rates_frd_rad_s)
-        if not scaled:
-            return step.setpoint
-        self.rates_bounded += 1
-        m = step.setpoint
-        return mavlink2.MAVLink_set_attitude_target_message(
-            m.time_boot_ms, m.target_system, m.target_component, m.type_mask, list(m.q), rates[0], rates[1], rates[2], m.thrust
-        )
+        return step.setpoint
 
     def _follow_step(self, step: Step) -> None:
         verdict = self._check(step)

@@ -138,6 +138,7 @@ class Encoder:
         target_component: int,
         hover_thrust: float = 0.5,
         time_constant_s: float = 0.1,
+        max_body_rate_rad_s: float | None = None,
     ) -> None:
         if output_mode not in ("acceleration", "attitude", "rates"):
             raise ValueError(f"unknown output mode {output_mode!r}")
@@ -151,12 +152,17 @@ class Encoder:
         self.target_component = target_component
         self.hover_thrust = hover_thrust
         self.time_constant_s = time_constant_s
+        # rates mode: the envelope's bound on what is sent (safety.max_body_rate_rad_s); here, in the
+        # pure encoder, so that `replay` reproduces it. None: unbounded.
+        if max_body_rate_rad_s is not None and not max_body_rate_rad_s > 0.0:
+            raise ValueError(f"max_body_rate_rad_s must be positive, got {max_body_rate_rad_s}")
+        self.max_body_rate_rad_s = max_body_rate_rad_s
 
     def with_hover_thrust(self, hover_thrust: float) -> Encoder:
         """The same encoder with the hover thrust read from the autopilot (validated like __init__)."""
         return Encoder(
             self.output_mode, self.profile, self.target_system, self.target_component,
-            hover_thrust=hover_thrust, time_constant_s=self.time_constant_s,
+            hover_thrust=hover_thrust, time_constant_s=self.time_constant_s, max_body_rate_rad_s=self.max_body_rate_rad_s,
         )  # fmt: skip
 
     # ------------------------------------------------------------------ path-following setpoints
@@ -213,6 +219,10 @@ class Encoder:
         thrust = thrust_normalised(float(cmd.thrust) * max(projection, _THRUST_PROJECTION_FLOOR), self.hover_thrust)
         rates_frd = frames.flu_to_frd(rates_flu)
         sent = (float(rates_frd[0]), float(rates_frd[1]), float(rates_frd[2]))
+        if self.max_body_rate_rad_s is not None:
+            from pf_offboard.safety.envelope import bound_body_rates
+
+            sent, _ = bound_body_rates(sent, self.max_body_rate_rad_s)
         return Encoded(self._attitude_msg(time_boot_ms, ATTITUDE_IGNORE, np.array([1.0, 0, 0, 0]), sent, thrust, ned=True), thrust, sent)
 
     def _attitude_msg(

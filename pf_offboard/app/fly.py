@@ -143,6 +143,12 @@ def envelope_fence(config: Any) -> Any:
     return fence
 
 
+def _rate_bound(config: Any) -> float | None:
+    """safety.max_body_rate_rad_s when the envelope is on (the encoder bounds rates-mode setpoints)."""
+    safety = getattr(config, "safety", None)
+    return safety.max_body_rate_rad_s if safety is not None and safety.enabled else None
+
+
 def default_log_dir() -> Path:
     stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
     return Path("flights") / stamp
@@ -237,6 +243,7 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             settings.output_mode, profile, target.system, target.component,
             hover_thrust=settings.hover_thrust if settings.hover_thrust is not None else 0.5,
             time_constant_s=settings.attitude_time_constant_s,
+            max_body_rate_rad_s=_rate_bound(config),
         )  # fmt: skip
         pipeline = Pipeline(follower, encoder, Estimator(args.state_source))
         safety = getattr(config, "safety", None) or SafetyConfig()
@@ -339,8 +346,6 @@ def _report(stream: TextIO, reason: str, code: int, summary: Any, log_dir: Path,
         print(f"  safety: {bridge.breach.kind.value}{when}: {bridge.breach.reason}", file=stream)
     if bridge.monitor is not None:
         print(f"  safety: max measured tilt {math.degrees(bridge.monitor.max_tilt_seen_rad):.1f} deg; fence {bridge.monitor.fence.describe()}", file=stream)
-    if bridge.rates_bounded:
-        print(f"  body rates bounded to safety.max_body_rate_rad_s in {bridge.rates_bounded} setpoints", file=stream)
     if bridge.pipeline.replaced_steps:
         print(f"  safe hold sent instead of a non-finite command {bridge.pipeline.replaced_steps} times", file=stream)
     if summary is not None:

@@ -155,6 +155,18 @@ def tilt_rate_rad_s(q_enu_flu: ArrayLike, rates_flu_rad_s: ArrayLike) -> float:
     return -(r20 * wy - r21 * wx) / sin_tilt
 
 
+def bound_body_rates(rates_frd_rad_s: Sequence[float], limit_rad_s: float) -> tuple[tuple[float, float, float], bool]:
+    """Body rates bounded by ``limit_rad_s``: roll and pitch scaled together (the tilting axis is
+    kept), yaw clipped on its own (a large heading error at activation must not slow the tilt).
+    Returns (rates, True if any was bounded)."""
+    p, q, r = (float(v) for v in rates_frd_rad_s)
+    peak = max(abs(p), abs(q))
+    bounded = peak > limit_rad_s or abs(r) > limit_rad_s
+    if peak > limit_rad_s:
+        p, q = p * limit_rad_s / peak, q * limit_rad_s / peak
+    return (p, q, max(-limit_rad_s, min(limit_rad_s, r))), bounded
+
+
 def _body_z(q: ArrayLike) -> tuple[float, float, float]:
     w, x, y, z = (float(v) for v in np.asarray(q, dtype=float))
     return (2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y))
@@ -347,16 +359,10 @@ class EnvelopeMonitor:
         slow the tilt). A saturation, not a breach: the app's attitude loop asks for large rates
         for a moment at activation; what leaves is bounded, as the autopilot's own loops are.
         Returns (rates, True if any was bounded)."""
-        p, q, r = (float(v) for v in rates_frd_rad_s)
-        limit = self.config.max_body_rate_rad_s
         if not self.config.enabled:
+            p, q, r = (float(v) for v in rates_frd_rad_s)
             return (p, q, r), False
-        peak = max(abs(p), abs(q))
-        bounded = peak > limit or abs(r) > limit
-        if peak > limit:
-            p, q = p * limit / peak, q * limit / peak
-        r = max(-limit, min(limit, r))
-        return (p, q, r), bounded
+        return bound_body_rates(rates_frd_rad_s, self.config.max_body_rate_rad_s)
 
     # ------------------------------------------------------------------ every setpoint, before it is sent
     def check_setpoint(

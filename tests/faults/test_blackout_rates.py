@@ -12,7 +12,7 @@ from sitl_mock.runner import spawn
 
 from tests.app.flights import run_fly
 
-from .common import last_heartbeat_mode, entries, hover, is_mode_request, is_safe_setpoint, own_clock, read_truth, write_config
+from .common import entries, hover, last_heartbeat_mode, is_mode_request, is_safe_setpoint, own_clock, read_truth, write_config
 
 pytestmark = pytest.mark.integration
 

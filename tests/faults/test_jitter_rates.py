@@ -9,7 +9,7 @@ from sitl_mock.runner import spawn
 
 from tests.app.flights import run_fly
 
-from .common import last_heartbeat_mode, hover, own_clock, read_truth, write_config
+from .common import hover, last_heartbeat_mode, own_clock, read_truth, write_config
 
 pytestmark = pytest.mark.integration
 

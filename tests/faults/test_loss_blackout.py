@@ -12,7 +12,7 @@ from sitl_mock.runner import spawn
 
 from tests.app.flights import run_fly
 
-from .common import last_heartbeat_mode, SETPOINT_TYPES, entries, hover, is_mode_request, is_safe_setpoint, own_clock, read_truth, write_config
+from .common import SETPOINT_TYPES, entries, last_heartbeat_mode, hover, is_mode_request, is_safe_setpoint, own_clock, read_truth, write_config
 
 pytestmark = pytest.mark.integration
 
@@ -25,7 +25,8 @@ def test_loss_and_blackout_end_in_the_requested_hold_not_rtl(tmp_path, seed: int
     from dataclasses import replace
 
     with spawn(replace(cfg, seed=seed)) as mock:
-        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--duration", "60")
+        # (connecting through 40 % loss to a 1 Hz HEARTBEAT at half speed can take more than 5 s)
+        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--duration", "60", "--heartbeat-timeout", "30")
     truth = read_truth(truth_log)
     t_off = float(truth.time_s[truth.mode.index("OFFBOARD")])
     during = truth.time_s >= t_off + 3.0
