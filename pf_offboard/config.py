@@ -18,6 +18,9 @@ from typing import Any
 from pf_offboard.control.types import GRAVITY_M_S2, MIN_THRUST_FLOOR_M_S2, Gains, Limits, VehicleModel, YawSpec
 from pf_offboard.errors import ConfigError, InputError
 from pf_offboard.frames import ned_to_enu, yaw_ned_to_enu, yaw_rate_ned_to_enu
+from pf_offboard.safety.envelope import ACTIONS as SAFETY_ACTIONS
+from pf_offboard.safety.envelope import SHAPES as FENCE_SHAPES
+from pf_offboard.safety.envelope import SafetyConfig
 
 MAX_SPEED_M_S = 20.0
 OUTPUT_MODES = ("acceleration", "attitude", "rates")
@@ -72,6 +75,7 @@ class Config:
     vehicle: VehicleModel = field(default_factory=VehicleModel.typical)
     compensation: CompensationConfig = field(default_factory=CompensationConfig)
     gains_auto: bool = False  # gains derived from the vehicle model (gains: auto or no gains section)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
     source: str = "<config>"
 
 
@@ -296,7 +300,60 @@ def _vehicle(data: Any) -> VehicleModel:
         raise ConfigError(exc.field, exc.reason) from None
 
 
-TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle", "compensation")
+def _safety(data: Any) -> SafetyConfig:
+    """``safety:`` section: the flight envelope (pf_offboard.safety; docs/app.md lists the fields)."""
+    names = tuple(f.name for f in fields(SafetyConfig))
+    d = _section(data, "safety", names)
+    default = SafetyConfig()
+
+    def num(name: str, lo: float, hi: float, lo_open: bool = False) -> float:
+        return _number(d, name, f"safety.{name}", getattr(default, name), lo, hi, lo_open=lo_open)  # type: ignore[return-value]
+
+    def vector(name: str, width: int) -> tuple[float, ...] | None:
+        if d.get(name) is None:
+            return None
+        return tuple(_pairs([d[name]], f"safety.{name}", width)[0])
+
+    fmin, fmax = vector("fence_min_enu_m", 3), vector("fence_max_enu_m", 3)
+    if (fmin is None) != (fmax is None):
+        raise ConfigError("safety.fence_min_enu_m", "give both fence_min_enu_m and fence_max_enu_m, or neither (fence around the path)")
+    if fmin is not None and fmax is not None and not all(lo < hi for lo, hi in zip(fmin, fmax)):
+        raise ConfigError("safety.fence_max_enu_m", f"must exceed fence_min_enu_m on every axis, got {list(fmin)} .. {list(fmax)}")
+    center = vector("fence_center_enu_m", 2)
+    radius = _number(d, "fence_radius_m", "safety.fence_radius_m", None, 0.0, 1e5, lo_open=True, nullable=True)
+    if (center is None) != (radius is None):
+        raise ConfigError("safety.fence_radius_m", "give both fence_center_enu_m and fence_radius_m, or neither (cylinder around the path)")
+    floor = num("min_altitude_m", -1e4, 1e4)
+    ceiling = num("max_altitude_m", -1e4, 1e5)
+    if ceiling <= floor:
+        raise ConfigError("safety.max_altitude_m", f"must exceed safety.min_altitude_m ({floor:g}), got {ceiling:g}")
+    return SafetyConfig(
+        enabled=_bool(d, "enabled", "safety.enabled", default.enabled),
+        action=_choice(d, "action", "safety.action", default.action, SAFETY_ACTIONS),
+        fence_shape=_choice(d, "fence_shape", "safety.fence_shape", default.fence_shape, FENCE_SHAPES),
+        fence_margin_m=num("fence_margin_m", 0.0, 1e4),
+        fence_min_enu_m=fmin,  # type: ignore[arg-type]
+        fence_max_enu_m=fmax,  # type: ignore[arg-type]
+        fence_center_enu_m=center,  # type: ignore[arg-type]
+        fence_radius_m=radius,
+        min_altitude_m=floor,
+        max_altitude_m=ceiling,
+        max_path_distance_at_activation_m=num("max_path_distance_at_activation_m", 0.0, 1e4, lo_open=True),
+        max_path_distance_m=num("max_path_distance_m", 0.0, 1e4, lo_open=True),
+        max_tilt_deg=num("max_tilt_deg", 0.0, 90.0, lo_open=True),
+        max_body_rate_rad_s=num("max_body_rate_rad_s", 0.0, 100.0, lo_open=True),
+        max_attitude_error_deg=num("max_attitude_error_deg", 0.0, 180.0, lo_open=True),
+        attitude_error_time_s=num("attitude_error_time_s", 0.0, 60.0),
+        max_descent_speed_m_s=num("max_descent_speed_m_s", 0.0, 100.0, lo_open=True),
+        no_progress_s=num("no_progress_s", 0.0, 3600.0, lo_open=True),
+        min_progress_m=num("min_progress_m", 0.0, 1e4, lo_open=True),
+        safe_mode_timeout_s=num("safe_mode_timeout_s", 0.0, 600.0, lo_open=True),
+        heartbeat_timeout_s=num("heartbeat_timeout_s", 0.0, 60.0, lo_open=True),
+        tilt_lookahead_s=num("tilt_lookahead_s", 0.0, 2.0),
+    )
+
+
+TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle", "compensation", "safety")
 
 
 def parse_config(data: Any, source: str = "<config>") -> Config:
@@ -335,6 +392,7 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
         limits=_limits(d.get("limits")),
         flight=_flight(d.get("flight")),
         vehicle=vehicle,
+        safety=_safety(d.get("safety")),
         source=source,
     )
 

@@ -16,6 +16,7 @@ import struct
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
@@ -149,6 +150,12 @@ class Autopilot:
             self._pending.append((f.estimator_reset_at_s, "reset", f.estimator_reset_ned_m))
         if f.gust_at_s is not None:
             self.sim.add_gust(f.gust_at_s, f.gust_duration_s, f.gust_ned_m_s)
+        if f.disarm_at_s is not None:
+            self._pending.append((f.disarm_at_s, "disarm", None))
+        if f.motor_failure_at_s is not None:
+            self._pending.append((f.motor_failure_at_s, "motor_failure", None))
+        self.motors_failed = False  # a motor failure: no thrust whatever the mode (the vehicle falls)
+        self.fault_injector: Any = None  # set by the server: told when OFFBOARD / GUIDED is first entered
 
     # ------------------------------------------------------------------------------------------
     # Derived state
@@ -519,6 +526,9 @@ class Autopilot:
         self.log.append(LogEvent(self.time_s, why))
 
     def _cmd_set_mode(self, p: list[float]) -> tuple[int, list[Out]]:
+        window = self.config.faults.mode_refused_s
+        if window is not None and window[0] <= self.time_s < window[1]:
+            return TEMP_REJECTED, []  # fault injection: a busy autopilot
         if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return DENIED, []  # base-mode-only switching is not modelled
         if self.profile.name == "px4":
@@ -596,6 +606,8 @@ class Autopilot:
             self.log.append(LogEvent(self.time_s, f"mode {self.mode.name} -> {spec.name}"))
         previous = self.mode
         self.mode = spec
+        if spec.behaviour is Behaviour.OFFBOARD and self.fault_injector is not None:
+            self.fault_injector.start_windows(self.time_s)
         if spec != previous or spec.behaviour is not Behaviour.OFFBOARD:
             self._enter(spec)
 
@@ -643,6 +655,12 @@ class Autopilot:
                 out += self.inject_takeover(arg)  # type: ignore[arg-type]
             elif kind == "reset":
                 out += self.inject_estimator_reset(arg)  # type: ignore[arg-type]
+            elif kind == "disarm" and self.armed:
+                self._disarm("disarmed in flight (fault injection)")
+                out.append(self._text(mavlink.MAV_SEVERITY_CRITICAL, "Disarmed in flight"))
+            elif kind == "motor_failure":
+                self.motors_failed = True
+                out.append(self._text(mavlink.MAV_SEVERITY_EMERGENCY, "Motor failure"))
 
     def _supervise(self, out: list[Out]) -> None:
         now = self.time_s
@@ -708,7 +726,7 @@ class Autopilot:
         return cached
 
     def _control(self, dt_s: float) -> Setpoint:
-        if not self.armed or self.motors_locked:
+        if not self.armed or self.motors_locked or self.motors_failed:
             return MotorsOff()
         behaviour = self.mode.behaviour
         landed = self.truth.landed

@@ -96,6 +96,15 @@ class FaultConfig:
     gust_at_s: float | None = None
     gust_ned_m_s: tuple[float, float, float] = (3.0, 0.0, 0.0)
     gust_duration_s: float = 1.0
+    # safety-test faults (tests/faults): the vehicle disarms / loses its motors (falls, crashes),
+    # mode requests are refused as TEMPORARILY_REJECTED (a busy autopilot), HEARTBEATs are lost
+    disarm_at_s: float | None = None
+    motor_failure_at_s: float | None = None
+    mode_refused_s: tuple[float, float] | None = None  # DO_SET_MODE refused for t in [t0, t1)
+    heartbeat_mute_s: tuple[float, float] | None = None  # no HEARTBEAT sent for t in [t0, t1)
+    # blackout_s / heartbeat_mute_s count from the first entry into OFFBOARD / GUIDED instead of
+    # boot (a test's fault then falls inside the flight however long the client took to start)
+    windows_from_offboard: bool = False
 
     def validate(self) -> None:
         for name in ("loss", "duplicate", "corrupt"):
@@ -106,14 +115,16 @@ class FaultConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise MockConfigError(f"faults.{name}", f"must be >= 0 s, got {value}")
-        if self.blackout_s is not None:
-            t0, t1 = self.blackout_s
-            if not (math.isfinite(t0) and math.isfinite(t1) and 0 <= t0 <= t1):
-                raise MockConfigError("faults.blackout_s", f"need 0 <= t0 <= t1, got {self.blackout_s}")
+        for name in ("blackout_s", "mode_refused_s", "heartbeat_mute_s"):
+            window = getattr(self, name)
+            if window is not None:
+                t0, t1 = window
+                if not (math.isfinite(t0) and math.isfinite(t1) and 0 <= t0 <= t1):
+                    raise MockConfigError(f"faults.{name}", f"need 0 <= t0 <= t1, got {window}")
         for name in ("estimator_reset_ned_m", "gust_ned_m_s"):
             if not all(math.isfinite(v) for v in getattr(self, name)):
                 raise MockConfigError(f"faults.{name}", "values must be finite")
-        for name in ("estimator_reset_at_s", "takeover_at_s", "gust_at_s"):
+        for name in ("estimator_reset_at_s", "takeover_at_s", "gust_at_s", "disarm_at_s", "motor_failure_at_s"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value >= 0.0):
                 raise MockConfigError(f"faults.{name}", f"must be a finite time >= 0 s, got {value}")

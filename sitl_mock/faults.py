@@ -24,15 +24,32 @@ class FaultInjector:
         self.dropped_in = 0
         self.duplicated = 0
         self.corrupted = 0
+        # where the blackout / mute windows count from (None: not yet, see windows_from_offboard)
+        self.origin_s: float | None = None if config.windows_from_offboard else 0.0
+
+    def start_windows(self, now_s: float) -> None:
+        """The autopilot entered OFFBOARD / GUIDED: relative windows count from now (once)."""
+        if self.origin_s is None:
+            self.origin_s = now_s
+
+    def _in(self, window: tuple[float, float] | None, now_s: float) -> bool:
+        if window is None or self.origin_s is None:
+            return False
+        return window[0] <= now_s - self.origin_s < window[1]
 
     def in_blackout(self, now_s: float) -> bool:
-        window = self.config.blackout_s
-        return window is not None and window[0] <= now_s < window[1]
+        return self._in(self.config.blackout_s, now_s)
+
+    def heartbeat_muted(self, data: bytes, now_s: float) -> bool:
+        """A HEARTBEAT (MAVLink 2 message id 0, bytes 7..9 of the frame) inside the mute window."""
+        if not self._in(self.config.heartbeat_mute_s, now_s):
+            return False
+        return len(data) > 10 and data[0] == 0xFD and data[7:10] == b"\x00\x00\x00"
 
     def outgoing(self, data: bytes, now_s: float) -> list[tuple[float, bytes]]:
         """(release time, bytes) for each copy to send; empty if the datagram is lost."""
         cfg = self.config
-        if self.in_blackout(now_s):
+        if self.in_blackout(now_s) or self.heartbeat_muted(data, now_s):
             self.dropped_out += 1
             return []
         if cfg.loss > 0.0 and self.rng.random() < cfg.loss:

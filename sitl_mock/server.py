@@ -129,6 +129,7 @@ class MockAutopilot:
         self.config = config
         self.autopilot = Autopilot(config)
         self.faults = FaultInjector(config.faults, self.autopilot.rng_faults)
+        self.autopilot.fault_injector = self.faults  # fault windows relative to OFFBOARD entry (tests/faults)
         self.ports = Ports(None, None)
         self._udp: asyncio.DatagramTransport | None = None
         self._udp_peers: dict[Any, _Peer] = {}

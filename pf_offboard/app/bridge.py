@@ -5,8 +5,11 @@ here. The decision rules are small pure classes (:class:`ThrowTrigger`, :class:`
 :func:`end_reason`) tested on their own; :class:`Bridge` wires them to a :class:`~.link.Link`.
 
 Phases: ``preflight`` → (``takeoff``) → ``waiting`` (throw) / ``engaging`` → ``following`` →
-``handing_back`` → ``done``; or ``taken_over`` (the operator switched the mode away: we stop
-sending at once and never re-engage), or ``failed``.
+``handing_back`` → ``done``; or ``taken_over`` (the operator switched the mode away, in any
+phase once we asked for a mode: we stop sending at once and never re-engage), or ``safing`` (an
+envelope breach, stale state, lost HEARTBEAT or a failure while we may be in control: only the
+safe setpoint goes out while the safe mode is requested until the HEARTBEAT confirms it) →
+``failed``. The envelope itself is :mod:`pf_offboard.safety` (pure); the bridge only wires it.
 """
 
 from __future__ import annotations
@@ -30,16 +33,21 @@ from pf_offboard.app.link import Link
 from pf_offboard.app.pipeline import Pipeline, Step, time_boot_ms
 from pf_offboard.app.profiles import Autopilot, ModeRequest, Profile, is_armed
 from pf_offboard.errors import InputError, LinkError
+from pf_offboard.safety import Breach, EnvelopeMonitor, SafetyConfig, Verdict, VehicleSample
 
 # Exit codes of `pf-offboard fly` (documented in docs/app.md).
 EXIT_OK = 0
 EXIT_INPUT = 2
 EXIT_LINK = 3  # no heartbeat, refused command, lost telemetry
 EXIT_TAKEOVER = 4  # the operator took the vehicle back; we yielded
+EXIT_BREACH = 5  # the flight envelope was breached: following ended, safe mode requested
+EXIT_CRASH = 6  # the vehicle disarmed, landed or fell while we commanded it
 EXIT_INTERRUPTED = 130  # Ctrl-C before following began
 
 
 KEEPALIVE_S = 0.1  # re-send the last setpoint when nothing went out for this long
+SAFE_MODE_RETRY_S = 0.25  # re-send the safe-mode request this often until the HEARTBEAT shows it
+MAV_STATE_CRITICAL = 5  # HEARTBEAT.system_status: the autopilot is in its own failsafe
 
 
 class Phase(enum.Enum):
@@ -49,9 +57,15 @@ class Phase(enum.Enum):
     ENGAGING = "engaging"  # mode switch to OFFBOARD / GUIDED requested, not yet confirmed
     FOLLOWING = "following"
     HANDING_BACK = "handing_back"
+    SAFING = "safing"  # only the safe setpoint goes out; the safe mode is requested until confirmed
     DONE = "done"
     TAKEN_OVER = "taken_over"
     FAILED = "failed"
+
+
+_TERMINAL = (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED)
+# a wait in one of these phases is cut short: the flight is ending another way
+_INTERRUPTING = (Phase.SAFING, *_TERMINAL)
 
 
 # ---------------------------------------------------------------------------- pure decision rules
@@ -193,6 +207,8 @@ class FlightResult:
     activation_time_s: float | None = None
     laps: float = 0.0
     steps: int = 0
+    breach: Verdict | None = None  # what ended following, if the envelope did
+    breach_time_s: float | None = None  # vehicle time of the last state sample when it was detected
 
 
 class Bridge:
@@ -210,6 +226,7 @@ class Bridge:
         on_step: Callable[[Step], None] | None = None,
         status_stream: TextIO | None = None,
         clock: Callable[[], float] = time.monotonic,
+        monitor: EnvelopeMonitor | None = None,
     ) -> None:
         self.link = link
         self.profile = profile
@@ -245,6 +262,22 @@ class Bridge:
         self.sent_setpoints = 0
         self._event = ""  # logged with the next step
         self.last_statustext = ""
+        # safety (pf_offboard.safety): the monitor decides, the bridge acts
+        self.monitor = monitor
+        self.safety = monitor.config if monitor is not None else SafetyConfig(enabled=False)
+        self.landed_state: int | None = None
+        self.breach: Verdict | None = None
+        self.breach_time_s: float | None = None
+        self._armed_seen = False
+        # Modes that are ours: the one the vehicle was in when we asked (or that we got) and the one
+        # we asked for. Any other mode in a HEARTBEAT is the operator's (or a failsafe's).
+        self._held_mode: int | None = None
+        self._pending_mode: int | None = None
+        self._last_heartbeat_wall = clock()
+        self._last_attitude_wall = -math.inf
+        self._safing: tuple[int, str, ModeRequest] | None = None
+        self._safe_msg: Any = None
+        self._activation_checked = False
         # before activation, stream the follower's own (inactive) setpoints as proof of life
         self._stream_follow_before_active = False
         if link.first_heartbeat is not None:  # mode and armed state known from the start
@@ -258,6 +291,11 @@ class Bridge:
             if target is None or msg.get_srcComponent() == target.component:
                 self._on_heartbeat(msg)
             return
+        if kind == "EXTENDED_SYS_STATE":
+            self.landed_state = int(msg.landed_state)
+            return
+        if kind in ("ATTITUDE_QUATERNION", "ODOMETRY"):
+            self._last_attitude_wall = self.clock()  # rates mode flies only on a fresh attitude
         if kind == "COMMAND_ACK":
             self.acks[msg.command] = msg.result
             self._changed.set()
@@ -282,26 +320,71 @@ class Bridge:
     def _on_heartbeat(self, msg: Any) -> None:
         previous = self.custom_mode
         self.custom_mode, self.base_mode = msg.custom_mode, msg.base_mode
+        self._last_heartbeat_wall = self.clock()
         self._changed.set()
+        phase = self.phase
+        if phase in _TERMINAL:
+            return
+        armed = is_armed(msg.base_mode)
+        if armed:
+            self._armed_seen = True
+        elif self._armed_seen and self._in_control() and phase is not Phase.WAITING:
+            # disarmed under our commands: crashed, killed or the autopilot's own failsafe
+            self._crash(Verdict(Breach.DISARMED, "the vehicle disarmed in flight (crash, kill switch or autopilot failsafe)"))
+            return
+        if self._pending_mode is not None and self._same_mode(msg.custom_mode, self._pending_mode):
+            self._held_mode, self._pending_mode = msg.custom_mode, None
         offboard = self.profile.is_offboard(msg.custom_mode)
-        if self.phase is Phase.ENGAGING and offboard:
+        if phase is Phase.ENGAGING and offboard:
             self._activate()
-        elif self.phase is Phase.FOLLOWING:
-            if offboard:
-                self.offboard_seen = True
-            elif self.offboard_seen:
-                # The operator (RC / ground station) took over: yield at once, never re-engage.
-                self.phase = Phase.TAKEN_OVER
-                self._last_setpoint = None
-                old = self.profile.mode_name(previous) if previous is not None else "?"
-                self._finish(EXIT_TAKEOVER, f"mode changed {old} -> {self.profile.mode_name(msg.custom_mode)} by someone else; stopped sending, not re-engaging")
+            return
+        if phase is Phase.FOLLOWING and offboard:
+            self.offboard_seen = True
+        if not self._in_control() or self._mode_is_ours(msg.custom_mode):
+            return
+        old = self.profile.mode_name(previous) if previous is not None else "?"
+        new = self.profile.mode_name(msg.custom_mode)
+        if msg.system_status >= MAV_STATE_CRITICAL:
+            # the autopilot's own failsafe (e.g. PX4 offboard loss -> RTL), not an operator: ask for
+            # our safe mode instead (an RTL climbs to tens of metres)
+            if phase is not Phase.SAFING:
+                self._enter_safing(EXIT_LINK, f"autopilot failsafe: mode {old} -> {new}")
+            return
+        # The operator (RC / ground station) took over: yield at once, never re-engage, in any phase.
+        self.phase = Phase.TAKEN_OVER
+        self._last_setpoint = None
+        self._safe_msg = None
+        self._finish(EXIT_TAKEOVER, f"mode changed {old} -> {new} by someone else during {phase.value}; stopped sending, not re-engaging")
+
+    def _in_control(self) -> bool:
+        """We have asked the autopilot for a mode (it may be flying our setpoints)."""
+        return self._held_mode is not None or self._pending_mode is not None
+
+    def _same_mode(self, custom_mode: int, ours: int) -> bool:
+        return custom_mode == ours or (self.profile.is_offboard(custom_mode) and self.profile.is_offboard(ours))
+
+    def _mode_is_ours(self, custom_mode: int) -> bool:
+        return any(m is not None and self._same_mode(custom_mode, m) for m in (self._held_mode, self._pending_mode))
+
+    def _custom_of(self, mode: ModeRequest) -> int:
+        p = self.profile
+        return {id(p.offboard): p.offboard_custom_mode, id(p.hold): p.hold_custom_mode, id(p.land): p.land_custom_mode}[id(mode)]
 
     def _on_state(self) -> None:
         est = self.pipeline.estimator.latest
         assert est is not None
         phase = self.phase
-        if phase in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
+        if phase in _TERMINAL:
             return
+        if phase is Phase.SAFING:
+            # the safe setpoint is stateless and streamed by the keep-alive; the controller is out
+            self.pipeline.mark_consumed()
+            return
+        if phase is Phase.TAKEOFF and self._armed_seen and self.monitor is not None:
+            verdict = self.monitor.check_state(self._sample(est, None), following=False)  # tilt, disarm
+            if verdict.breach:
+                self._breach(verdict, est)
+                return
         if phase is Phase.FOLLOWING:
             step = self.pipeline.step("following", True, self._pending_event())
             if step is not None:
@@ -314,6 +397,11 @@ class Bridge:
             return
         if phase is Phase.TAKEOFF and self._takeoff_target is not None:
             self.pipeline.mark_consumed()
+            if self.monitor is not None and self._takeoff_target[2] > est.position_enu_m[2] + 0.05:
+                verdict = self.monitor.check_setpoint(position_target_enu_m=self._climb_target())
+                if verdict.breach:
+                    self._breach(verdict, est)
+                    return
             self._send(position_setpoint(self.link.target.system, self.link.target.component, time_boot_ms(est), self._takeoff_target, self._takeoff_yaw))
             return
         if phase in (Phase.WAITING, Phase.ENGAGING) and self._stream_follow_before_active:
@@ -322,10 +410,15 @@ class Bridge:
             step = self.pipeline.step(phase.value, phase is Phase.ENGAGING, self._pending_event())
             if step is None:
                 return
+            if phase is Phase.ENGAGING:  # these setpoints fly as soon as the mode switches: check them
+                verdict = self._check(step)
+                if verdict.breach:
+                    self._breach(verdict, step.estimate)
+                    return
             self.last_step = step
             if self.on_step is not None:
                 self.on_step(step)
-            self._send(step.setpoint)
+            self._send(self._outgoing(step) if phase is Phase.ENGAGING else step.setpoint)
             if self.throw is not None and phase is Phase.WAITING:
                 altitude = float(est.position_enu_m[2])
                 if self.throw.update(altitude, float(np.linalg.norm(est.velocity_enu_m_s))):
@@ -338,10 +431,64 @@ class Bridge:
         ev, self._event = self._event, ""
         return ev
 
+    def _sample(self, est: StateEstimate, step: Step | None) -> VehicleSample:
+        cmd = step.command if step is not None else None
+        rates = self.pipeline.encoder.output_mode == "rates"
+        return VehicleSample(
+            time_s=est.time_s,
+            position_enu_m=est.position_enu_m,
+            velocity_enu_m_s=est.velocity_enu_m_s,
+            q_enu_flu=est.q_enu_flu,
+            armed=is_armed(self.base_mode),
+            landed_state=self.landed_state,
+            cross_track_m=float(cmd.cross_track_m) if cmd is not None else None,
+            eta1_m=float(cmd.state.eta1) if cmd is not None else None,
+            # our own attitude loop is judged only once the vehicle flies it (not while engaging)
+            q_cmd_enu_flu=np.asarray(cmd.attitude, dtype=float) if (cmd is not None and rates and self.phase is Phase.FOLLOWING) else None,
+            rates_flu_rad_s=est.rates_flu_rad_s,
+            q_demand_enu_flu=np.asarray(cmd.attitude, dtype=float) if cmd is not None else None,
+        )
+
+    def _check(self, step: Step) -> Verdict:
+        """The envelope monitor on one controller step: the state it came from, then the setpoint
+        itself, before it leaves. Activation (first active step) has its own distance limit."""
+        monitor = self.monitor
+        if monitor is None:
+            return Verdict()
+        sample = self._sample(step.estimate, step)
+        if not self._activation_checked:
+            self._activation_checked = True
+            verdict = monitor.check_activation(sample)
+            if verdict.breach:
+                return verdict
+        verdict = monitor.check_state(sample, following=True)
+        if verdict.breach or step.command is None or step.encoded.replaced:
+            return verdict  # (a replaced step already carries the hold, not the command)
+        mode, cmd = self.pipeline.encoder.output_mode, step.command
+        return monitor.check_setpoint(
+            q_cmd_enu_flu=cmd.attitude if mode != "acceleration" else None,
+            rates_frd_rad_s=step.encoded.rates_frd_rad_s if mode == "rates" else None,
+            accel_cmd_enu_m_s2=cmd.acceleration if mode == "acceleration" else None,
+        )
+
+    def _outgoing(self, step: Step) -> Any:
+        """What actually leaves for an active step: in rates mode, the level hold (quaternion +
+        thrust) when the attitude is not fresh (the rates would be flown open loop). (Body rates
+        are bounded by the encoder itself: safety.max_body_rate_rad_s.)"""
+        if self.pipeline.encoder.output_mode != "rates" or step.encoded.rates_frd_rad_s is None:
+            return step.setpoint
+        if self.clock() - self._last_attitude_wall > KEEPALIVE_S:
+            return self._safe_setpoint(step.estimate)
+        return step.setpoint
+
     def _follow_step(self, step: Step) -> None:
+        verdict = self._check(step)
+        if verdict.breach:
+            self._breach(verdict, step.estimate)
+            return
         self.last_step = step
         self.steps += 1
-        self._send(step.setpoint)
+        self._send(self._outgoing(step))
         if self.on_step is not None:
             self.on_step(step)
         rec = step.record
@@ -355,6 +502,90 @@ class Bridge:
             self.phase = Phase.HANDING_BACK
             self._changed.set()
 
+    # ------------------------------------------------------------------ ending: breach, crash, safe mode
+    def _breach(self, verdict: Verdict, est: StateEstimate | None) -> None:
+        """The envelope was left (or would be by this setpoint): end following, stream only the
+        safe setpoint and request the safe mode; a vehicle that disarmed needs nothing more."""
+        if self.breach is not None or self.phase in _TERMINAL:
+            return
+        self.breach, self.breach_time_s = verdict, (est.time_s if est is not None else None)
+        self._event = f"safety: {verdict.kind.value}"
+        if verdict.crash and not is_armed(self.base_mode):
+            self._crash(verdict)
+            return
+        self._enter_safing(EXIT_CRASH if verdict.crash else EXIT_BREACH, f"safety: {verdict.reason}")
+
+    def _crash(self, verdict: Verdict) -> None:
+        """Disarmed under our commands: nothing to hold. Stop sending at once and end."""
+        if self.breach is None:
+            est = self.pipeline.estimator.latest
+            self.breach, self.breach_time_s = verdict, (est.time_s if est is not None else None)
+        self._print(f"safety: {verdict.reason}")
+        self._last_setpoint = None
+        self._safe_msg = None
+        self.phase = Phase.FAILED
+        self._finish(EXIT_CRASH, f"safety: {verdict.reason}; stopped commanding")
+
+    def _safe_setpoint(self, est: StateEstimate | None) -> Any:
+        """Stateless, safe to hold for as long as the autopilot keeps it (see Encoder.safe)."""
+        yaw = yaw_of(est.q_enu_flu) if est is not None and est.q_enu_flu is not None else self._takeoff_yaw
+        stamp = time_boot_ms(est) if est is not None else 0
+        return self.pipeline.encoder.safe(yaw, stamp).message
+
+    def _enter_safing(self, code: int, reason: str, mode: ModeRequest | None = None) -> None:
+        """From now on only the safe setpoint goes out (at the setpoint rate, from the keep-alive)
+        while :meth:`_safe_mode` requests ``mode`` (default: safety.action) until confirmed."""
+        if self.phase in _TERMINAL or self.phase is Phase.SAFING:
+            return
+        if mode is None:
+            mode = self.profile.land if self.safety.action == "land" else self.profile.hold
+        est = self.pipeline.estimator.latest
+        if self.phase is Phase.TAKEOFF and self.profile.autopilot is Autopilot.ARDUPILOT:
+            safe = None  # GUIDED take-off: any setpoint would cancel it; the mode request suffices
+        elif self.phase is Phase.TAKEOFF and est is not None:
+            # climbing on position setpoints: hold the current position (PX4 closes the loop)
+            safe = position_setpoint(self.link.target.system, self.link.target.component, time_boot_ms(est), est.position_enu_m, self._takeoff_yaw)
+        else:
+            safe = self._safe_setpoint(est)
+        self._print(f"{reason}; sending only the safe setpoint, requesting {mode.name}")
+        self._safing = (code, reason, mode)
+        self.phase = Phase.SAFING
+        self._safe_msg = safe
+        self._last_setpoint = None
+        if safe is not None:
+            self._send(safe)
+        self._changed.set()
+
+    async def _safe_mode(self) -> None:
+        """Request the safe mode every SAFE_MODE_RETRY_S until a HEARTBEAT shows it (or the
+        operator takes over, or safety.safe_mode_timeout_s passes); then stop sending."""
+        assert self._safing is not None
+        code, reason, mode = self._safing
+        custom = self._custom_of(mode)
+        deadline = self.clock() + self.safety.safe_mode_timeout_s
+        confirmed = False
+        while self.phase is Phase.SAFING:
+            confirmed = self.custom_mode == custom
+            if confirmed or self.clock() > deadline:
+                break
+            try:
+                self._set_mode_nowait(mode)
+            except LinkError:
+                pass
+            await self._wait_until(lambda: self.phase is not Phase.SAFING or self.custom_mode == custom, SAFE_MODE_RETRY_S, interruptible=False)
+        self._safe_msg = None
+        self._last_setpoint = None
+        if self.result is None:
+            tail = "confirmed" if confirmed else f"not confirmed within {self.safety.safe_mode_timeout_s:g} s"
+            self.phase = Phase.FAILED
+            self._finish(code, f"{reason}; {mode.name} requested, {tail}")
+
+    def _climb_target(self) -> Any:
+        t = self._takeoff_target
+        assert t is not None
+        floor = self.monitor.fence.floor_m if self.monitor is not None else -math.inf
+        return np.array([t[0], t[1], max(float(t[2]), floor)])
+
     def _engage(self, event: str) -> None:
         """From now on the streamed setpoints are meant to fly (mode switch requested)."""
         est = self.pipeline.estimator.latest
@@ -363,6 +594,8 @@ class Bridge:
         self.phase = Phase.ENGAGING
 
     def _activate(self) -> None:
+        if self.phase in _INTERRUPTING:
+            return  # the flight is ending (safing / taken over): never start following now
         est = self.pipeline.estimator.latest
         if self.activation_time_s is None and est is not None:
             self.activation_time_s = est.time_s
@@ -396,6 +629,11 @@ class Bridge:
         self.link.send(mavlink2.MAVLink_command_long_message(t.system, t.component, command, 0, *p))
 
     def _set_mode_nowait(self, mode: ModeRequest) -> None:
+        if self.phase is Phase.TAKEN_OVER:
+            return  # the operator has the vehicle: never ask for a mode again
+        if self._held_mode is None:
+            self._held_mode = self.custom_mode  # what the vehicle was in when we first asked
+        self._pending_mode = self._custom_of(mode)
         self._command(mavlink2.MAV_CMD_DO_SET_MODE, 1.0, mode.param2, mode.param3)
 
     def _request_offboard_nowait(self) -> None:
@@ -403,11 +641,13 @@ class Bridge:
             self._command(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
         self._set_mode_nowait(self.profile.offboard)
 
-    async def _wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+    async def _wait_until(self, predicate: Callable[[], bool], timeout_s: float, interruptible: bool = True) -> bool:
+        """Until ``predicate()`` or the timeout; an ``interruptible`` wait also ends on a stop request
+        and when the flight is ending another way (safing, taken over, failed)."""
         deadline = self.clock() + timeout_s
         while not predicate():
             remaining = deadline - self.clock()
-            if remaining <= 0 or self._stop.is_set():
+            if remaining <= 0 or (interruptible and (self._stop.is_set() or self.phase in _INTERRUPTING)):
                 return predicate()
             self._changed.clear()
             try:
@@ -423,6 +663,8 @@ class Bridge:
         deadline = self.clock() + self.options.command_timeout_s
         final = (mavlink2.MAV_RESULT_DENIED, mavlink2.MAV_RESULT_UNSUPPORTED)
         while True:
+            if self.phase in _INTERRUPTING:  # taken over / safing: never send another request
+                raise LinkError(f"{what}: interrupted")
             send()
             await self._wait_until(lambda: confirmed() or self.acks.get(command) in final, 0.5)
             if confirmed():
@@ -431,7 +673,7 @@ class Bridge:
             detail = f" (COMMAND_ACK result {result}{'; autopilot: ' + self.last_statustext if self.last_statustext else ''})"
             if result in final:
                 raise LinkError(f"{what} refused by the autopilot{detail}")
-            if self._stop.is_set() or self.phase in (Phase.TAKEN_OVER, Phase.FAILED):
+            if self._stop.is_set() or self.phase in _INTERRUPTING:
                 raise LinkError(f"{what}: interrupted")
             if self.clock() > deadline:
                 raise LinkError(f"{what}: not confirmed within {self.options.command_timeout_s:g} s{detail}")
@@ -489,6 +731,8 @@ class Bridge:
         if self.phase in (Phase.FOLLOWING, Phase.ENGAGING, Phase.WAITING, Phase.TAKEOFF, Phase.PREFLIGHT):
             self._end_reason = reason
             self.phase = Phase.HANDING_BACK
+        elif self.phase is Phase.SAFING:
+            return  # already stopping: the safe-mode request goes on
         self._stop.set()
         self._changed.set()
 
@@ -501,7 +745,9 @@ class Bridge:
 
     async def fly(self, setup: Callable[[], Awaitable[None]] | None = None) -> FlightResult:
         """``setup`` (streams, parameters), launch, follow, hand back. Returns how it ended
-        (LinkError becomes exit 3; InputError from ``setup`` propagates)."""
+        (LinkError becomes exit 3; InputError from ``setup`` propagates). Whatever ends the flight
+        while we may be in control goes through :meth:`_safe_mode` (safe setpoint, safe mode
+        requested until confirmed), except an operator takeover (nothing more is sent)."""
         try:
             if setup is not None:
                 await setup()
@@ -510,18 +756,32 @@ class Bridge:
             if self.phase is Phase.HANDING_BACK:
                 await self._hand_back()
         except LinkError as exc:
-            if self._stop.is_set() and self.result is None:
-                # Ctrl-C before following had begun: ask for the hold mode once, stop sending
-                await self._safe_exit()
-                self._finish(EXIT_INTERRUPTED, f"{self._end_reason or 'interrupted'} before following began; hold mode requested")
-            elif self.phase is not Phase.TAKEN_OVER:
+            if self.phase in _INTERRUPTING or self.result is not None:
+                pass  # safing, taken over or ended: handled below / already decided
+            elif self._stop.is_set():
+                # Ctrl-C / SIGTERM before following had begun
+                why = f"{self._end_reason or 'interrupted'} before following began"
+                if self._in_control():
+                    self._enter_safing(EXIT_INTERRUPTED, why, self._end_mode())
+                else:
+                    self._finish(EXIT_INTERRUPTED, f"{why}; nothing was commanded")
+            else:
                 self._print(f"error: {exc}")
-                await self._safe_exit()
-                self._finish(EXIT_LINK, str(exc))
+                if self._in_control():
+                    self._enter_safing(EXIT_LINK, str(exc))
+                else:
+                    self._finish(EXIT_LINK, str(exc))
+        if self.phase is Phase.SAFING and self.result is None:
+            await self._safe_mode()
         if self.result is None:
             self._finish(EXIT_LINK, "ended unexpectedly")
         assert self.result is not None
+        if self.result.breach is None and self.breach is not None:
+            self.result.breach, self.result.breach_time_s = self.breach, self.breach_time_s
         return self.result
+
+    def _end_mode(self) -> ModeRequest:
+        return self.profile.land if self.options.end_action == "land" else self.profile.hold
 
     async def _launch(self) -> None:
         opts = self.options
@@ -620,54 +880,56 @@ class Bridge:
         self._takeoff_target = None
 
     async def _hand_back(self) -> None:
-        """Stream the hold setpoint while asking for the safe mode, then stop."""
-        mode, custom = (self.profile.land, self.profile.land_custom_mode) if self.options.end_action == "land" else (self.profile.hold, self.profile.hold_custom_mode)
+        """Stream the hold setpoint while asking for the hand-back mode, re-sent until the
+        HEARTBEAT confirms it; then stop. (Not confirmed in time: safing retries it.)"""
+        mode = self._end_mode()
+        custom = self._custom_of(mode)
         self._print(f"{self._end_reason}; handing back in {mode.name}")
         self._stop.clear()
-        try:
-            await self.set_mode(mode, custom)
-        finally:
-            self.phase = Phase.DONE
-            self._last_setpoint = None
-        self._finish(EXIT_OK, f"{self._end_reason}; handed back in {mode.name}")
-
-    async def _safe_exit(self) -> None:
-        """After a failure while we may be in control: ask for the hold mode once, stop sending."""
-        if self.phase in (Phase.FOLLOWING, Phase.ENGAGING, Phase.TAKEOFF, Phase.HANDING_BACK):
-            try:
-                self._set_mode_nowait(self.profile.land if self.options.end_action == "land" else self.profile.hold)
-            except LinkError:
-                pass
-        self.phase = Phase.FAILED
+        await self.set_mode(mode, custom)
+        self.phase = Phase.DONE
         self._last_setpoint = None
+        self._finish(EXIT_OK, f"{self._end_reason}; handed back in {mode.name}")
 
     # ------------------------------------------------------------------ periodic tasks (wall clock)
     async def keepalive(self) -> None:
-        """Proof-of-life guard and stale-state watchdog (wall clock).
+        """Proof-of-life guard, stale-state and HEARTBEAT watchdogs, safe-setpoint stream (wall clock).
 
-        While setpoints are computed on every fresh state sample, the last one is re-sent only
-        when nothing went out for ``KEEPALIVE_S`` (10 Hz, five times PX4's 2 Hz minimum and well
-        inside COM_OF_LOSS_T): re-sending a control setpoint faster would fly a stale command
-        whenever a sample is merely late (and would advance a lockstep simulator with it).
+        While setpoints are computed on every fresh state sample, nothing is re-sent unless nothing
+        went out for ``KEEPALIVE_S`` (10 Hz, five times PX4's 2 Hz minimum and well inside
+        COM_OF_LOSS_T); then, while our setpoints fly (engaging, following, handing back), the
+        *safe* setpoint goes out, never the last command: a command computed from a state that
+        is now late would be flown open loop (body rates flip a vehicle in a fraction of a second).
         Before any state sample (preflight) the neutral setpoint goes out every setpoint period.
+        While safing, the safe setpoint (stateless) goes out every setpoint period.
         """
         period = 1.0 / self.options.setpoint_rate_hz
-        while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
+        while self.phase not in _TERMINAL:
             await asyncio.sleep(period)
             now = self.clock()
-            if self.phase is Phase.FOLLOWING and now - self._last_fresh_wall > self.options.state_timeout_s:
-                self._print(f"error: no fresh state for {now - self._last_fresh_wall:.2f} s (state_timeout_s {self.options.state_timeout_s:g}); handing back")
-                await self._safe_exit()
-                self._finish(EXIT_LINK, "state went stale")
+            phase = self.phase
+            if phase is Phase.SAFING:
+                if self._safe_msg is not None and now - self._last_send_wall >= period:
+                    self._send(self._safe_msg)
+                continue
+            if phase in _TERMINAL:
                 return
-            preflight = self.phase is Phase.PREFLIGHT and self._neutral_allowed()
+            silent = now - self._last_heartbeat_wall
+            if self._in_control() and phase is not Phase.WAITING and silent > self.safety.heartbeat_timeout_s:
+                self._enter_safing(EXIT_LINK, f"no HEARTBEAT from the autopilot for {silent:.2f} s (safety.heartbeat_timeout_s {self.safety.heartbeat_timeout_s:g}): mode unknown")
+                continue
+            if phase in (Phase.FOLLOWING, Phase.ENGAGING) and now - self._last_fresh_wall > self.options.state_timeout_s:
+                self._enter_safing(EXIT_LINK, f"state went stale: no fresh state for {now - self._last_fresh_wall:.2f} s (state_timeout_s {self.options.state_timeout_s:g})")
+                continue
+            preflight = phase is Phase.PREFLIGHT and self._neutral_allowed()
             if preflight and (self._last_setpoint is None or now - self._last_send_wall >= period):
                 self._send_neutral()
             elif self._last_setpoint is not None and now - self._last_send_wall >= KEEPALIVE_S:
-                self._send(self._last_setpoint)
+                flying = phase in (Phase.FOLLOWING, Phase.ENGAGING, Phase.HANDING_BACK)
+                self._send(self._safe_setpoint(self.pipeline.estimator.latest) if flying else self._last_setpoint)
 
     async def heartbeat(self) -> None:
-        while self.phase not in (Phase.DONE, Phase.TAKEN_OVER, Phase.FAILED):
+        while self.phase not in _TERMINAL:
             self.link.send_heartbeat()
             await asyncio.sleep(1.0)
 

@@ -138,6 +138,7 @@ class Encoder:
         target_component: int,
         hover_thrust: float = 0.5,
         time_constant_s: float = 0.1,
+        max_body_rate_rad_s: float | None = None,
     ) -> None:
         if output_mode not in ("acceleration", "attitude", "rates"):
             raise ValueError(f"unknown output mode {output_mode!r}")
@@ -151,12 +152,17 @@ class Encoder:
         self.target_component = target_component
         self.hover_thrust = hover_thrust
         self.time_constant_s = time_constant_s
+        # rates mode: the envelope's bound on what is sent (safety.max_body_rate_rad_s); here, in the
+        # pure encoder, so that `replay` reproduces it. None: unbounded.
+        if max_body_rate_rad_s is not None and not max_body_rate_rad_s > 0.0:
+            raise ValueError(f"max_body_rate_rad_s must be positive, got {max_body_rate_rad_s}")
+        self.max_body_rate_rad_s = max_body_rate_rad_s
 
     def with_hover_thrust(self, hover_thrust: float) -> Encoder:
         """The same encoder with the hover thrust read from the autopilot (validated like __init__)."""
         return Encoder(
             self.output_mode, self.profile, self.target_system, self.target_component,
-            hover_thrust=hover_thrust, time_constant_s=self.time_constant_s,
+            hover_thrust=hover_thrust, time_constant_s=self.time_constant_s, max_body_rate_rad_s=self.max_body_rate_rad_s,
         )  # fmt: skip
 
     # ------------------------------------------------------------------ path-following setpoints
@@ -213,6 +219,10 @@ class Encoder:
         thrust = thrust_normalised(float(cmd.thrust) * max(projection, _THRUST_PROJECTION_FLOOR), self.hover_thrust)
         rates_frd = frames.flu_to_frd(rates_flu)
         sent = (float(rates_frd[0]), float(rates_frd[1]), float(rates_frd[2]))
+        if self.max_body_rate_rad_s is not None:
+            from pf_offboard.safety.envelope import bound_body_rates
+
+            sent, _ = bound_body_rates(sent, self.max_body_rate_rad_s)
         return Encoded(self._attitude_msg(time_boot_ms, ATTITUDE_IGNORE, np.array([1.0, 0, 0, 0]), sent, thrust, ned=True), thrust, sent)
 
     def _attitude_msg(
@@ -261,6 +271,27 @@ class Encoder:
         sent = (float(rates_frd[0]), float(rates_frd[1]), float(rates_frd[2]))
         msg = self._attitude_msg(time_boot_ms, ATTITUDE_IGNORE, np.array([1.0, 0, 0, 0]), sent, self.hover_thrust, ned=True)
         return Encoded(msg, self.hover_thrust, sent, reason or "hold")
+
+    def safe(self, yaw_enu_rad: float, time_boot_ms: int, reason: str = "safe") -> Encoded:
+        """A setpoint that is safe to hold with no fresh state: it depends on no measurement, so
+        the autopilot closes every loop on its own estimate, however long it keeps it (ArduPilot:
+        GUID_TIMEOUT) and however stale our state is. Never body rates (open loop).
+
+        acceleration: zero acceleration (PX4: level at its own hover thrust), and where the
+        profile takes a velocity target (ArduPilot) a zero one, so it brakes to a stop;
+        attitude / rates: level attitude quaternion at ``yaw_enu_rad``, hover thrust.
+        """
+        yaw = yaw_enu_rad if math.isfinite(yaw_enu_rad) else 0.0
+        if self.output_mode == "acceleration":
+            mask = TYPE_MASK_VEL_ACCEL_YAW_YAWRATE if self.profile.accel_with_velocity else TYPE_MASK_ACCEL_YAW_YAWRATE
+            msg = mavlink2.MAVLink_set_position_target_local_ned_message(
+                time_boot_ms, self.target_system, self.target_component, MAV_FRAME_LOCAL_NED,
+                mask, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, frames.yaw_enu_to_ned(yaw), 0.0,
+            )  # fmt: skip
+            return Encoded(msg, math.nan, None, reason)
+        mask = _ROLL_RATE_IGNORE | _PITCH_RATE_IGNORE | _YAW_RATE_IGNORE_ATT
+        msg = self._attitude_msg(time_boot_ms, mask, level_attitude(yaw), (0.0, 0.0, 0.0), self.hover_thrust)
+        return Encoded(msg, self.hover_thrust, None, reason)
 
     def idle(self, est: StateEstimate, time_boot_ms: int) -> Encoded:
         """Zero-thrust, level attitude setpoint (proof of life while waiting for a throw)."""

@@ -124,6 +124,31 @@ def _check_args(args: argparse.Namespace) -> None:
         raise InputError("--target-system", f"must be a MAVLink system id in 1..255, got {args.target_system}")
 
 
+def envelope_fence(config: Any) -> Any:
+    """The safety fence for this config's path (pf_offboard.safety); InputError (exit 2) if the
+    path itself leaves it or dips below the floor: such a flight is refused before any traffic."""
+    from pf_offboard.path import Path as SplinePath
+    from pf_offboard.safety import SafetyConfig, check_path, fence_for_path
+
+    safety = getattr(config, "safety", None) or SafetyConfig()
+    p = config.path
+    path = SplinePath.from_waypoints(p.waypoints_enu_m, closed=p.closed, frame=p.moving_frame)
+    n = max(2, math.ceil(path.lam_max / 0.05) + 1)  # every 5 cm or finer
+    points = [path.eval_floats(path.lam_max * i / (n - 1))[:3] for i in range(n)]
+    fence = fence_for_path(safety, points)
+    if safety.enabled:
+        why = check_path(fence, points)
+        if why:
+            raise InputError("safety", why)
+    return fence
+
+
+def _rate_bound(config: Any) -> float | None:
+    """safety.max_body_rate_rad_s when the envelope is on (the encoder bounds rates-mode setpoints)."""
+    safety = getattr(config, "safety", None)
+    return safety.max_body_rate_rad_s if safety is not None and safety.enabled else None
+
+
 def default_log_dir() -> Path:
     stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
     return Path("flights") / stamp
@@ -139,6 +164,8 @@ class FlyOutcome:
     records: list[Any]
     summary: Any | None
     activation_time_s: float | None
+    breach: Any | None = None  # pf_offboard.safety.Verdict when the envelope ended the flight
+    breach_time_s: float | None = None  # vehicle time it was detected
 
 
 def run(args: argparse.Namespace) -> int:
@@ -156,19 +183,20 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None) -> FlyOut
     _heights_from_config(args, config)
     _check_args(args)
     settings = flight_settings(config, args)
+    fence = envelope_fence(config)  # a path outside the fence is bad input: refused before any traffic
     if args.log_dir:
         from pf_offboard.logs._io import make_dir
 
         make_dir(args.log_dir, "--log-dir")  # an unwritable log directory is bad input: found before connecting
     stream = status_stream if status_stream is not None else sys.stderr
     try:
-        return asyncio.run(_fly(args, endpoint, config, settings, stream))
+        return asyncio.run(_fly(args, endpoint, config, settings, stream, fence))
     except LinkError as exc:
         print(f"pf-offboard fly: link error: {exc}", file=stream)
         return FlyOutcome(3, str(exc), None, [], None, None)
 
 
-async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: FlightSettings, stream: TextIO) -> FlyOutcome:
+async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: FlightSettings, stream: TextIO, fence: Any = None) -> FlyOutcome:
     from pymavlink.dialects.v20 import common as mavlink2
 
     from pf_offboard.app.bridge import Bridge, BridgeOptions, EndSpec
@@ -181,6 +209,7 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     from pf_offboard.logs.flightlog import FlightLog
     from pf_offboard.logs.steplog import read_steplog
     from pf_offboard.logs.summary import summarize
+    from pf_offboard.safety import EnvelopeMonitor, SafetyConfig
 
     follower = PathFollower.from_config(config)
     link = Link.open(endpoint)
@@ -214,12 +243,15 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             settings.output_mode, profile, target.system, target.component,
             hover_thrust=settings.hover_thrust if settings.hover_thrust is not None else 0.5,
             time_constant_s=settings.attitude_time_constant_s,
+            max_body_rate_rad_s=_rate_bound(config),
         )  # fmt: skip
         pipeline = Pipeline(follower, encoder, Estimator(args.state_source))
+        safety = getattr(config, "safety", None) or SafetyConfig()
+        monitor = EnvelopeMonitor(safety, fence if fence is not None else envelope_fence(config), path.length_m, path.closed)
         bridge = Bridge(
             link, profile, pipeline, options, path.length_m, path.closed, path.lam_max,
             on_step=lambda step: flight_log.step(step.record),  # the CSV, not memory: flights can be long
-            status_stream=stream,
+            status_stream=stream, monitor=monitor,
         )  # fmt: skip
         link.start_reading(bridge.on_message)
 
@@ -227,8 +259,11 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             # telemetry at the rates we need: state at the setpoint rate (a fresh sample drives
             # each setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s where honoured.
             state_id = mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED if args.state_source == "local_position" else mavlink2.MAVLINK_MSG_ID_ODOMETRY
-            for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
-                bridge.request_interval(msg_id, rate)
+            # each request three times: idempotent, and a lossy link must not leave HEARTBEAT at 1 Hz
+            # (the lost-HEARTBEAT watchdog counts on it)
+            for _ in range(3):
+                for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
+                    bridge.request_interval(msg_id, rate)
             if settings.hover_thrust is None and settings.output_mode != "acceleration":
                 hover = await bridge.read_param(profile.hover_thrust_param)
                 if not 0.05 <= hover <= 0.95:
@@ -243,7 +278,11 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
                               "expect lag and, at high gains, oscillation; raise PSC_JERK_XY/Z or use --output rates", file=stream)  # fmt: skip
 
         loop = asyncio.get_running_loop()
-        loop.add_signal_handler(signal.SIGINT, bridge.request_stop)
+        # SIGTERM (systemd, docker stop) and SIGHUP (the terminal closed) end the flight like Ctrl-C:
+        # hold requested, summary printed, logs closed.
+        stops = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGHUP: "SIGHUP"}
+        for signum, name in stops.items():
+            loop.add_signal_handler(signum, bridge.request_stop, f"stop requested ({name})")
         # The path, its caches and pymavlink's tables live for the whole flight: take them out of
         # the cyclic collector's scans so full collections do not stall the 250 Hz loop.
         gc.freeze()
@@ -262,7 +301,8 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
                 raise first from None
             raise
         finally:
-            loop.remove_signal_handler(signal.SIGINT)
+            for signum in stops:
+                loop.remove_signal_handler(signum)
     finally:
         link.close()
         if log is not None:
@@ -271,7 +311,8 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     records = read_steplog(log.paths.steps_csv)
     summary = summarize(records) if records else None
     _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
-    return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s)
+    return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s,
+                      result.breach, result.breach_time_s)  # fmt: skip
 
 
 def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[type-arg]
@@ -300,6 +341,11 @@ async def _check_guid_options(bridge: Any, required: int, allow_set: bool, outpu
 
 def _report(stream: TextIO, reason: str, code: int, summary: Any, log_dir: Path, bridge: Any) -> None:
     print(f"pf-offboard fly: {reason} (exit {code})", file=stream)
+    if bridge.breach is not None:
+        when = f" at t = {bridge.breach_time_s:.2f} s" if bridge.breach_time_s is not None else ""
+        print(f"  safety: {bridge.breach.kind.value}{when}: {bridge.breach.reason}", file=stream)
+    if bridge.monitor is not None:
+        print(f"  safety: max measured tilt {math.degrees(bridge.monitor.max_tilt_seen_rad):.1f} deg; fence {bridge.monitor.fence.describe()}", file=stream)
     if bridge.pipeline.replaced_steps:
         print(f"  safe hold sent instead of a non-finite command {bridge.pipeline.replaced_steps} times", file=stream)
     if summary is not None:

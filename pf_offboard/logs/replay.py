@@ -262,6 +262,7 @@ def build_pipeline(
         output_mode, profile, target_system, target_component,
         hover_thrust=float(hover) if hover is not None else 0.5,
         time_constant_s=settings.attitude_time_constant_s,
+        max_body_rate_rad_s=config.safety.max_body_rate_rad_s if config.safety.enabled else None,  # as fly bounds them
     )  # fmt: skip
     if follower is None:
         follower = PathFollower.from_config(config)

@@ -1,0 +1,24 @@
+"""Flight safety: the envelope monitor between the controller and the link (docs/app.md, "Safety").
+
+Pure: state samples and setpoints in, verdicts out. The bridge (:mod:`pf_offboard.app.bridge`)
+only wires it to the link and acts on its verdicts.
+"""
+
+from pf_offboard.safety.envelope import (
+    ACTIONS,
+    SHAPES,
+    Breach,
+    EnvelopeMonitor,
+    Fence,
+    SafetyConfig,
+    Verdict,
+    VehicleSample,
+    check_path,
+    fence_for_path,
+    tilt_rad,
+)
+
+__all__ = [
+    "ACTIONS", "SHAPES", "Breach", "EnvelopeMonitor", "Fence", "SafetyConfig", "Verdict", "VehicleSample",
+    "check_path", "fence_for_path", "tilt_rad",
+]
