@@ -1,5 +1,8 @@
 """MAVLink 2 signing keys from a key file (the same formats the app and ``sitl-mock`` read).
 
+A copy of ``pf_offboard/app/signing.py``: the mock stands in for an autopilot and imports nothing
+from the app (tests/sitl_mock/test_mock_signing.py checks the two agree).
+
 A key file holds one of (checked in this order):
 
 1. exactly 32 bytes that are not all printable text: the raw secret key;
