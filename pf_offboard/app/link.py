@@ -119,6 +119,8 @@ STATE_MESSAGES = frozenset({"LOCAL_POSITION_NED", "ODOMETRY", "ATTITUDE_QUATERNI
 # Linux: kernel receive timestamps of UDP datagrams (socket(7)); not exported by Python's socket.
 _SO_TIMESTAMPNS = 35
 _TIMESPEC = struct.Struct("@ll")
+# A datagram was read but yielded no message to handle (another sender, a partial frame).
+_SKIPPED: Any = ("skipped",)
 
 
 @dataclass(frozen=True)
@@ -249,32 +251,32 @@ class Link:
             self._reading = False
 
     def _next(self) -> tuple[Any, Any, float] | None:
-        """The next (message, sender address or None, seconds it waited in the socket)."""
+        """The next (message, sender address or None, seconds it waited in the socket); None when
+        nothing is waiting; ``_SKIPPED`` for a datagram read that gave nothing to handle."""
         if self._pending:
             return self._pending.popleft()
         if self._udp_sock is None:
             msg = self._conn.recv_msg()  # TCP / serial: one peer by construction
             return None if msg is None else (msg, None, 0.0)
-        while True:
-            try:
-                data, ancdata, _flags, addr = self._udp_sock.recvmsg(65535, socket.CMSG_SPACE(16) if self._kernel_stamps else 0)
-            except (BlockingIOError, InterruptedError):
-                return None
-            except ConnectionRefusedError:  # ICMP port unreachable from an earlier send: nobody there yet
-                continue
-            if self.peer is not None and addr != self.peer:
-                self._n["foreign_peer"] += 1  # not even decoded: a flood from elsewhere costs one recvmsg
-                continue
-            age = 0.0
-            for level, kind, raw in ancdata:
-                if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= _TIMESPEC.size:
-                    sec, nsec = _TIMESPEC.unpack_from(raw)
-                    age = max(0.0, time.time() - (sec + nsec * 1e-9))
-            msgs = self._conn.mav.parse_buffer(data) or []
-            for m in msgs:
-                self._pending.append((m, addr, age))
-            if self._pending:
-                return self._pending.popleft()
+        try:
+            data, ancdata, _flags, addr = self._udp_sock.recvmsg(65535, socket.CMSG_SPACE(16) if self._kernel_stamps else 0)
+        except (BlockingIOError, InterruptedError):
+            return None
+        except ConnectionRefusedError:  # ICMP port unreachable from an earlier send: nobody there yet
+            return _SKIPPED
+        if self.peer is not None and addr != self.peer:
+            # not even decoded: a flood from elsewhere costs one recvmsg each, and counts against
+            # the wake-up's budget like any datagram (else it could keep the reader busy forever)
+            self._n["foreign_peer"] += 1
+            return _SKIPPED
+        age = 0.0
+        for level, kind, raw in ancdata:
+            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= _TIMESPEC.size:
+                sec, nsec = _TIMESPEC.unpack_from(raw)
+                age = max(0.0, time.time() - (sec + nsec * 1e-9))  # time it waited in the socket
+        for m in self._conn.mav.parse_buffer(data) or []:
+            self._pending.append((m, addr, age))
+        return self._pending.popleft() if self._pending else _SKIPPED
 
     def _drain(self) -> None:
         """Decode up to MAX_MESSAGES_PER_WAKEUP waiting messages; never blocks."""
@@ -287,6 +289,8 @@ class Link:
                 return
             if item is None:
                 return
+            if item is _SKIPPED:
+                continue
             self._dispatch(*item)
             if not self._reading:  # the handler stopped reading (e.g. wait_heartbeat finished)
                 return
@@ -369,7 +373,9 @@ class Link:
         finally:
             self.stop_reading()
         if not found.done():
-            raise LinkError(f"no HEARTBEAT from an autopilot on {self.endpoint} within {timeout_s:g} s")
+            refused = self._n["bad_signature"]
+            hint = f" ({refused} frames refused: unsigned or signed with another key)" if refused else ""
+            raise LinkError(f"no HEARTBEAT from an autopilot on {self.endpoint} within {timeout_s:g} s{hint}")
         self.target = found.result()
         # UDP: lock to the address the autopilot spoke from (the first peer): the same ids from any
         # other address are a second sender, refused from now on.
