@@ -280,7 +280,9 @@ class Link:
 
     def _drain(self) -> None:
         """Decode up to MAX_MESSAGES_PER_WAKEUP waiting messages; never blocks."""
-        self._resume = None
+        if self._resume is not None:  # draining now: a scheduled resume would be a second slice
+            self._resume.cancel()
+            self._resume = None
         for _ in range(MAX_MESSAGES_PER_WAKEUP):
             try:
                 item = self._next()
@@ -295,10 +297,10 @@ class Link:
             if not self._reading:  # the handler stopped reading (e.g. wait_heartbeat finished)
                 return
         # Budget spent with (maybe) more waiting: yield to the other tasks. A socket with data wakes
-        # the reader again by itself; messages already decoded (several per datagram, or
-        # pymavlink's buffer on TCP / serial) need an explicit resume.
+        # the reader again by itself (level-triggered); messages already decoded (several per
+        # datagram) or buffered by pymavlink (TCP / serial) need an explicit resume.
         self._n["reader_yields"] += 1
-        if self._resume is None:
+        if self._pending or self._udp_sock is None:
             self._resume = asyncio.get_running_loop().call_soon(self._drain)
 
     def _dispatch(self, msg: Any, addr: Any, age_s: float) -> None:
