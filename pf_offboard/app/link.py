@@ -328,6 +328,21 @@ class Link:
         if self._handler is not None:
             self._handler(msg)
 
+    def _from_configured_address(self, addr: Any) -> bool:
+        """``udpout`` names the autopilot's address: only it may identify as the autopilot. (``udpin``
+        cannot know it in advance: the first autopilot HEARTBEAT fixes it; sign the link to
+        authenticate it.)"""
+        if self.endpoint.kind != "udpout" or addr is None:
+            return True
+        dest = getattr(self._conn, "destination_addr", None)
+        if dest is None:
+            return True
+        try:
+            host = socket.gethostbyname(dest[0])
+        except OSError:
+            return True
+        return (addr[0], addr[1]) == (host, int(dest[1]))
+
     def _lock_udpin(self) -> None:
         """``udpin``: from now on send only to the locked peer (pymavlink answers every sender)."""
         if self.peer is not None and self.endpoint.kind == "udpin":
@@ -353,6 +368,9 @@ class Link:
             if found.done() or not is_vehicle_heartbeat(msg):
                 return
             if target_system is not None and msg.get_srcSystem() != target_system:
+                return
+            if not self._from_configured_address(self._last_addr):
+                self._n["foreign_peer"] += 1  # udpout: the autopilot is the address we were told
                 return
             self.first_heartbeat = msg
             found_addr = self._last_addr
