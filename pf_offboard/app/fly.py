@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import datetime as _dt
+import functools
 import gc
 import math
 import signal
@@ -149,8 +150,9 @@ class FlyOutcome:
     link_counters: Any | None = None  # pf_offboard.app.link.LinkCounters
     estimator: Any | None = None  # the flight's Estimator (its plausibility counters)
 
-    @property
+    @functools.cached_property
     def records(self) -> list[Any]:
+        """Every step, read from the log the first time it is asked for (then kept)."""
         if self.log_dir is None:
             return []
         from pf_offboard.logs.steplog import read_steplog

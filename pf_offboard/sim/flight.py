@@ -21,6 +21,7 @@ throw trigger for a thrown start), follow until the duration or lap count is rea
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import time
 from collections import deque
@@ -83,9 +84,10 @@ class SimResult:
     sim_time_s: float
     autopilot_log: list[str] = field(default_factory=list)
 
-    @property
+    @functools.cached_property
     def records(self) -> list[StepRecord]:
-        """Every step of the flight, read from the step log (for tests and analysis, not the CLI)."""
+        """Every step of the flight, read from the step log the first time it is asked for (for
+        tests and analysis, not the CLI), then kept."""
         from pf_offboard.logs.steplog import read_steplog
 
         return read_steplog(self.paths.steps_csv)
