@@ -279,6 +279,11 @@ class Estimator:
         last = self._latest
         self.clock_reanchors += 1
         jump = time_s - last.time_s if last is not None else 0.0
+        if jump > 0.0:
+            # forward and confirmed: the stream resumed after a gap (the state timeout, not the
+            # estimator, decides whether following survives one); no position reset implied
+            self.last_event = f"state resumed {jump:.3f} s later (confirmed by the next sample)"
+            return
         self._reset(f"autopilot clock jumped {jump:+.3f} s (confirmed: reboot or clock reset)")
 
     def _local_position(self, msg: Any) -> bool:

@@ -176,3 +176,13 @@ def test_the_flight_clock_is_continuous_across_a_clock_jump() -> None:
     _stream(est, 18, 250)
     # 1 s before the jump + 1 s after it; not 61 s, nor negative
     assert est.latest.time_s == pytest.approx(1.014) and est.latest.clock_s == pytest.approx(2.0)
+
+
+def test_a_gap_in_the_stream_is_confirmed_without_a_reset() -> None:
+    """Samples resuming 2 s later (a blackout): the first is held back, the next confirms the new
+    time, and no estimator reset is flagged (the position did not jump)."""
+    est = Estimator("local_position")
+    assert all(_stream(est, 1000, 10))
+    assert not est.on_message(local_position(3036, (1.0, 2.0, -3.0), (0, 0, 0)))
+    assert est.on_message(local_position(3040, (1.0, 2.0, -3.0), (0, 0, 0)))
+    assert est.clock_reanchors == 1 and not est.reset_pending and "resumed 2.004 s later" in est.last_event
