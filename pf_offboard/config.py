@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import reprlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -80,6 +81,33 @@ class Config:
 
 
 # ---------------------------------------------------------------------------------- helpers
+# A config file is text of a few kB; anything far larger is not one (and would be slow to parse).
+MAX_CONFIG_BYTES = 1 << 20
+# Positive quantities have a smallest meaningful value: "> 0" alone lets 1e-320 through, which
+# passes the check and divides by zero later.
+MIN_BANDWIDTH_HZ = 0.01
+MIN_DAMPING = 0.01
+MIN_SPEED_M_S = 0.01
+MIN_TILT_DEG = 1.0
+MIN_STATE_TIMEOUT_S = 0.01
+
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxdict, _REPR.maxstring, _REPR.maxother, _REPR.maxlong = 3, 6, 6, 60, 60, 40
+
+
+def _show(value: Any) -> str:
+    """A short, one-line, depth-limited repr of a value from the file, for error messages."""
+    try:
+        return _REPR.repr(value)
+    except Exception:  # noqa: BLE001 - an exotic object's repr must not turn an error into a traceback
+        return f"<{type(value).__name__}>"
+
+
+def _to_float(v: int | float, name: str) -> float:
+    try:
+        return float(v)
+    except OverflowError:  # an integer written with hundreds of digits (1e400)
+        raise ConfigError(name, f"number out of range: {_show(v)}") from None
 def _section(data: Any, name: str, allowed: tuple[str, ...], required: bool = False) -> Mapping[str, Any]:
     if data is None:
         if required:
@@ -88,8 +116,9 @@ def _section(data: Any, name: str, allowed: tuple[str, ...], required: bool = Fa
     if not isinstance(data, Mapping):
         raise ConfigError(name or "<top level>", f"must be a mapping, got {type(data).__name__}")
     for key in data:
-        if key not in allowed:
-            raise ConfigError(f"{name}.{key}" if name else str(key), f"unknown key (allowed: {', '.join(allowed)})")
+        if not isinstance(key, str) or key not in allowed:
+            shown = key if isinstance(key, str) else _show(key)
+            raise ConfigError(f"{name}.{shown}" if name else shown, f"unknown key (allowed: {', '.join(allowed)})")
     return data
 
 
@@ -109,8 +138,8 @@ def _number(
     if v is None and nullable:
         return None
     if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ConfigError(name, f"must be a number, got {v!r}")
-    v = float(v)
+        raise ConfigError(name, f"must be a number, got {_show(v)}")
+    v = _to_float(v, name)
     if not math.isfinite(v):
         raise ConfigError(name, f"must be finite, got {v}")
     if lo is not None and (v < lo or (lo_open and v == lo)):
@@ -123,14 +152,14 @@ def _number(
 def _choice(data: Mapping[str, Any], key: str, name: str, default: str, choices: tuple[str, ...]) -> str:
     v = data.get(key, default)
     if not isinstance(v, str) or v not in choices:
-        raise ConfigError(name, f"must be one of {', '.join(choices)}, got {v!r}")
+        raise ConfigError(name, f"must be one of {', '.join(choices)}, got {_show(v)}")
     return v
 
 
 def _bool(data: Mapping[str, Any], key: str, name: str, default: bool) -> bool:
     v = data.get(key, default)
     if not isinstance(v, bool):
-        raise ConfigError(name, f"must be true or false, got {v!r}")
+        raise ConfigError(name, f"must be true or false, got {_show(v)}")
     return v
 
 
@@ -141,14 +170,15 @@ def _pairs(value: Any, name: str, width: int) -> list[list[float]]:
     for i, row in enumerate(value):
         item = f"{name}[{i}]"
         if not isinstance(row, (list, tuple)) or len(row) != width:
-            raise ConfigError(item, f"must be a list of {width} numbers, got {row!r}")
+            raise ConfigError(item, f"must be a list of {width} numbers, got {_show(row)}")
         vals = []
         for x in row:
             if isinstance(x, bool) or not isinstance(x, (int, float)):
-                raise ConfigError(item, f"must be {width} numbers, got {row!r}")
-            if not math.isfinite(float(x)):
-                raise ConfigError(item, f"must be finite, got {row!r}")
-            vals.append(float(x))
+                raise ConfigError(item, f"must be {width} numbers, got {_show(row)}")
+            f = _to_float(x, item)
+            if not math.isfinite(f):
+                raise ConfigError(item, f"must be finite, got {_show(row)}")
+            vals.append(f)
         out.append(vals)
     return out
 
@@ -184,10 +214,10 @@ def _gains(data: Any) -> Gains:
     for loop in ("transversal", "tangential"):
         sub = _section(d.get(loop), f"gains.{loop}", ("bandwidth_hz", "damping"))
         vals[f"{loop}_bandwidth_hz"] = _number(
-            sub, "bandwidth_hz", f"gains.{loop}.bandwidth_hz", getattr(default, f"{loop}_bandwidth_hz"), 0.0, 50.0, lo_open=True
+            sub, "bandwidth_hz", f"gains.{loop}.bandwidth_hz", getattr(default, f"{loop}_bandwidth_hz"), MIN_BANDWIDTH_HZ, 50.0
         )
         vals[f"{loop}_damping"] = _number(
-            sub, "damping", f"gains.{loop}.damping", getattr(default, f"{loop}_damping"), 0.0, 5.0, lo_open=True
+            sub, "damping", f"gains.{loop}.damping", getattr(default, f"{loop}_damping"), MIN_DAMPING, 5.0
         )
     return Gains(**vals)  # type: ignore[arg-type]
 
@@ -230,7 +260,7 @@ def _limits(data: Any) -> Limits:
     )
     default = Limits()
     g = GRAVITY_M_S2
-    tilt = _number(d, "max_tilt_deg", "limits.max_tilt_deg", default.max_tilt_deg, 0.0, 80.0, lo_open=True)
+    tilt = _number(d, "max_tilt_deg", "limits.max_tilt_deg", default.max_tilt_deg, MIN_TILT_DEG, 80.0)
     tmin = _number(
         d, "min_thrust_m_s2", "limits.min_thrust_m_s2", default.min_thrust_m_s2, MIN_THRUST_FLOOR_M_S2, round(0.9 * g, 3)
     )
@@ -261,7 +291,7 @@ def _flight(data: Any) -> FlightConfig:
     return FlightConfig(
         output_mode=_choice(d, "output_mode", "flight.output_mode", f.output_mode, OUTPUT_MODES),
         setpoint_rate_hz=_number(d, "setpoint_rate_hz", "flight.setpoint_rate_hz", f.setpoint_rate_hz, 20.0, 1000.0),  # type: ignore[arg-type]
-        state_timeout_s=_number(d, "state_timeout_s", "flight.state_timeout_s", f.state_timeout_s, 0.0, 5.0, lo_open=True),  # type: ignore[arg-type]
+        state_timeout_s=_number(d, "state_timeout_s", "flight.state_timeout_s", f.state_timeout_s, MIN_STATE_TIMEOUT_S, 5.0),  # type: ignore[arg-type]
         hover_thrust=_number(d, "hover_thrust", "flight.hover_thrust", f.hover_thrust, 0.05, 0.95, nullable=True),
         takeoff_altitude_m=_number(d, "takeoff_altitude_m", "flight.takeoff_altitude_m", f.takeoff_altitude_m, 0.3, 100.0),  # type: ignore[arg-type]
         throw_activation_height_m=_number(
@@ -367,8 +397,8 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
     path = _path(d.get("path"))
     speed = _number(d, "speed_m_s", "speed_m_s", 1.0, -MAX_SPEED_M_S, MAX_SPEED_M_S)
     assert speed is not None
-    if speed == 0.0:
-        raise ConfigError("speed_m_s", "must be non-zero (its sign picks the direction of travel)")
+    if abs(speed) < MIN_SPEED_M_S:
+        raise ConfigError("speed_m_s", f"must be non-zero, |speed| >= {MIN_SPEED_M_S:g} m/s (its sign picks the direction of travel), got {speed:g}")
     vehicle = _vehicle(d.get("vehicle"))
     compensation = _compensation(d.get("compensation"))
     raw_gains = d.get("gains")
@@ -404,16 +434,29 @@ class _StrictLoader:
     def make() -> type:
         import yaml
 
-        class Loader(yaml.SafeLoader):
+        # libyaml's parser when PyYAML was built with it (5x faster: configs are loaded by every
+        # command and thousands of times by the fuzz tests); the constructors stay PyYAML's safe ones.
+        base = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+        class Loader(base):  # type: ignore[misc, valid-type]
             pass
 
         def construct_mapping(loader: Any, node: Any, deep: bool = False) -> dict[Any, Any]:
             seen: dict[Any, Any] = {}
+            if not isinstance(node, yaml.MappingNode):
+                raise ConfigError(f"line {node.start_mark.line + 1}", "expected a mapping")
             for key_node, value_node in node.value:
+                line = key_node.start_mark.line + 1
+                if not isinstance(key_node, yaml.ScalarNode):
+                    # a list or mapping as a key (`? [a, b]`): never a config field (and unhashable)
+                    raise ConfigError(f"line {line}", f"a key must be a plain name, not a {key_node.id}")
                 key = loader.construct_object(key_node, deep=deep)
-                if key in seen:
-                    line = key_node.start_mark.line + 1
-                    raise ConfigError(str(key), f"duplicate key at line {line}")
+                try:
+                    duplicate = key in seen
+                except TypeError:  # an unhashable scalar (e.g. !!binary is bytes: hashable; belt and braces)
+                    raise ConfigError(f"line {line}", f"unusable key {_show(key)}") from None
+                if duplicate:
+                    raise ConfigError(_show(key) if not isinstance(key, str) else key, f"duplicate key at line {line}")
                 seen[key] = loader.construct_object(value_node, deep=deep)
             return seen
 
@@ -423,20 +466,51 @@ class _StrictLoader:
 
 def load_config(path: str | os.PathLike[str]) -> Config:
     """Read and validate a YAML config file."""
-    import yaml
-
     source = os.fspath(path)
     try:
-        with open(source, encoding="utf-8") as fh:
-            text = fh.read()
+        with open(source, "rb") as fh:
+            data = fh.read(MAX_CONFIG_BYTES + 1)
     except OSError as exc:
         raise ConfigError(source, f"cannot read config file: {exc.strerror or exc}") from None
+    return parse_config_bytes(data, source)
+
+
+def parse_config_bytes(data: bytes, source: str = "<config>") -> Config:
+    """Validate a config file's content: UTF-8 YAML text. Every failure is one :class:`ConfigError`
+    (non-UTF-8 bytes, oversized, YAML syntax, keys that are lists / mappings, nesting deeper than
+    the parser can follow, integers too long to read) naming the file or the field."""
+    import yaml
+
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(source, f"larger than {MAX_CONFIG_BYTES // 1024} kB: not a config file")
     try:
-        data = yaml.load(text, Loader=_StrictLoader.make())  # noqa: S506 - a SafeLoader subclass
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise ConfigError(source, f"not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start}, line {line})") from None
+    try:
+        loaded = yaml.load(text, Loader=_StrictLoader.make())  # noqa: S506 - a SafeLoader subclass
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "unknown position"
         raise ConfigError(source, f"YAML syntax error at {where}: {exc.problem or exc.context}") from None
     except yaml.YAMLError as exc:
-        raise ConfigError(source, f"YAML error: {exc}") from None
-    return parse_config(data, source=source)
+        raise ConfigError(source, f"YAML error: {_one_line(exc)}") from None
+    except RecursionError:
+        raise ConfigError(source, "YAML nested too deeply (a config is a few levels deep)") from None
+    except ConfigError:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        # PyYAML's constructors are not hardened against hostile text: an integer of more than 4300
+        # digits raises ValueError (Python's int limit), an explicit `!!timestamp x` AttributeError,
+        # bad base64 binascii.Error. Whatever it is, the file is unreadable: one line, not a traceback.
+        raise ConfigError(source, f"unreadable YAML value ({type(exc).__name__}: {_one_line(exc)})") from None
+    try:
+        return parse_config(loaded, source=source)
+    except RecursionError:  # a deep structure in a value (its repr in a message, or a comparison)
+        raise ConfigError(source, "YAML nested too deeply (a config is a few levels deep)") from None
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 200 else text[:197] + "..."

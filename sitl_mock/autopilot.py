@@ -11,6 +11,7 @@ Links are small integers chosen by the caller; outgoing messages are ``(link, me
 
 from __future__ import annotations
 
+import collections
 import math
 import struct
 from collections.abc import Mapping
@@ -23,6 +24,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_mock import telemetry
 from sitl_mock.config import MockConfig
+
+MAX_LOG_EVENTS = 10_000
 from sitl_mock.control import (
     PX4_GAINS,
     ArduGuided,
@@ -114,7 +117,9 @@ class Autopilot:
         self.time_s = 0.0
         self.est_offset_ned_m = np.zeros(3)
         self.reset_counter = 0
-        self.log: list[LogEvent] = []
+        # the latest events only: setpoints ignored outside OFFBOARD / GUIDED log one each, and an
+        # hour-long run must not grow without bound
+        self.log: collections.deque[LogEvent] = collections.deque(maxlen=MAX_LOG_EVENTS)
         self.streams: dict[int, telemetry.StreamTable] = {}
         # Mode state.
         self.armed = spawn.kind in ("hover", "throw")

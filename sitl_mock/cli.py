@@ -103,6 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--takeover", metavar="T[,MODE]",
                    help="operator switches mode at T (default POSCTL for px4, LOITER for ardupilot)")
     f.add_argument("--gust", metavar="T,vn,ve,vd[,DUR]", help="(1-cos) wind gust NED m/s at T lasting DUR s (default 1)")
+    p.add_argument("--signing-key", metavar="FILE",
+                   help="MAVLink 2 signing: sign what is sent, drop unsigned / wrongly signed frames "
+                   "(FILE: 32 raw bytes, 64 hex digits or a passphrase hashed with SHA-256)")
     p.add_argument("--truth-log", metavar="CSV", help="write the true vehicle state at every autopilot step")
     p.add_argument("--print-ports", action="store_true", help='print {"udp": port, "tcp": port} as JSON on stdout first')
     p.add_argument("--bench", action="store_true", help="print simulation-speed benchmarks and exit")
@@ -205,6 +208,7 @@ def config_from_args(args: argparse.Namespace) -> MockConfig:
         duration_s=args.duration,
         truth_log=args.truth_log,
         **wind,  # type: ignore[arg-type]
+        signing_key_file=args.signing_key,
     )
     config.validate()
     return config
@@ -255,6 +259,8 @@ def config_to_args(config: MockConfig) -> list[str]:
         args += ["--duration", repr(c.duration_s)]
     if c.truth_log:
         args += ["--truth-log", c.truth_log]
+    if c.signing_key_file:
+        args += ["--signing-key", c.signing_key_file]
     return args
 
 
@@ -267,6 +273,8 @@ def _describe(config: MockConfig, ports: object) -> str:
     if tcp is not None:
         parts.append(f"TCP 127.0.0.1:{tcp}")
     parts.append(f"lockstep {config.lockstep_dt_s} s/setpoint" if config.lockstep else f"speed {config.speed}x")
+    if config.signing_key_file:
+        parts.append("MAVLink 2 signing on")
     return ", ".join(parts)
 
 

@@ -166,6 +166,9 @@ class MockConfig:
     wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     wind_gust_std_m_s: float = 0.0
     wind_gust_time_constant_s: float = 2.0
+    # MAVLink 2 signing key file (32 raw bytes, 64 hex digits or a passphrase; sitl_mock.signing):
+    # sign everything sent, drop unsigned / wrongly signed frames. None: no signing.
+    signing_key_file: str | None = None
 
     def validate(self) -> None:
         if self.profile not in PROFILES:
@@ -213,6 +216,21 @@ class MockConfig:
             raise MockConfigError("home", f"need finite lat in [-90, 90], lon in [-180, 180], alt; got "
                                   f"{(self.home_lat_deg, self.home_lon_deg, self.home_alt_m)}")
         self.faults.validate()
+        if self.signing_key_file is not None:
+            self.signing_key()
+
+    def signing_key(self) -> bytes | None:
+        """The 32-byte key of ``signing_key_file`` (None without one); MockConfigError if unusable."""
+        if self.signing_key_file is None:
+            return None
+        from sitl_mock.signing import read_key_file
+
+        try:
+            return read_key_file(self.signing_key_file)
+        except OSError as exc:
+            raise MockConfigError("signing_key_file", f"cannot read {self.signing_key_file}: {exc.strerror or exc}") from None
+        except ValueError as exc:
+            raise MockConfigError("signing_key_file", f"{self.signing_key_file}: {exc}") from None
 
     def wind(self) -> Wind:
         """The dynamics' wind model for this configuration."""

@@ -16,6 +16,7 @@ import asyncio
 import csv
 import heapq
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TextIO
@@ -39,16 +40,29 @@ class Ports:
     tcp: int | None
 
 
-def new_mavlink() -> mavlink.MAVLink:
+# MAVLink 2 signing timestamps count 10 µs units from 2015-01-01 (the MAVLink signing spec).
+_SIGNING_EPOCH_UNIX_S = 1420070400
+
+
+def new_mavlink(signing_key: bytes | None = None) -> mavlink.MAVLink:
+    """A per-peer encoder/parser; with ``signing_key`` it signs what it packs and refuses unsigned or
+    wrongly signed frames (pymavlink raises "Invalid signature"; no unsigned callback: refused)."""
     mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     mav.robust_parsing = True
+    if signing_key is not None:
+        mav.signing.secret_key = signing_key
+        mav.signing.sign_outgoing = True
+        mav.signing.link_id = 0
+        mav.signing.allow_unsigned_callback = None
+        mav.signing.timestamp = int(max(time.time() - _SIGNING_EPOCH_UNIX_S, 0.0) * 100_000)
     return mav
 
 
-def parse_datagram(mav: mavlink.MAVLink, data: bytes) -> list[mavlink.MAVLink_message]:
-    """Decode the whole MAVLink frames of one UDP datagram with pymavlink's ``decode`` (CRC
-    checked; failures are dropped), skipping the byte-by-byte parser. Anything unexpected
-    (a partial frame, garbage) goes to pymavlink's resynchronising ``parse_buffer``."""
+def parse_datagram(mav: mavlink.MAVLink, data: bytes, on_bad: Callable[[str], None] | None = None) -> list[mavlink.MAVLink_message]:
+    """Decode the whole MAVLink frames of one UDP datagram with pymavlink's ``decode`` (CRC and,
+    with signing, signature checked; failures are dropped and reported to ``on_bad(reason)``),
+    skipping the byte-by-byte parser. Anything unexpected (a partial frame, garbage) goes to
+    pymavlink's resynchronising ``parse_buffer``."""
     out: list[mavlink.MAVLink_message] = []
     i, n = 0, len(data)
     while i < n:
@@ -63,8 +77,9 @@ def parse_datagram(mav: mavlink.MAVLink, data: bytes) -> list[mavlink.MAVLink_me
             return out + [m for m in (mav.parse_buffer(data[i:]) or []) if m.get_type() != "BAD_DATA"]
         try:
             out.append(mav.decode(bytearray(data[i : i + length])))
-        except mavlink.MAVError:
-            pass  # CRC or length mismatch: the frame is dropped, as the real autopilots do
+        except mavlink.MAVError as exc:  # CRC, length or signature: dropped, as the real autopilots do
+            if on_bad is not None:
+                on_bad(str(exc))
         i += length
     return out
 
@@ -89,8 +104,8 @@ class _Peer:
 
     __slots__ = ("mav", "write", "link", "buffer")
 
-    def __init__(self, link: int, write: Callable[[bytes], None]) -> None:
-        self.mav = new_mavlink()
+    def __init__(self, link: int, write: Callable[[bytes], None], signing_key: bytes | None = None) -> None:
+        self.mav = new_mavlink(signing_key)
         self.write = write
         self.link = link
         self.buffer = bytearray()
@@ -146,6 +161,11 @@ class MockAutopilot:
         self._done: asyncio.Event | None = None
         self.received = 0
         self.steps = 0
+        self._signing_key = config.signing_key()
+        self.rejected_signature = 0  # frames refused: unsigned or wrongly signed (signing on)
+        self.rejected_corrupt = 0  # frames refused: CRC / length
+        # called with every accepted message and the sender (UDP address or TCP link number)
+        self.on_received: Callable[[mavlink.MAVLink_message, Any], None] | None = None
 
     # ------------------------------------------------------------------------------------------
     # Lifecycle
@@ -367,23 +387,43 @@ class MockAutopilot:
     # ------------------------------------------------------------------------------------------
     # Receiving
     # ------------------------------------------------------------------------------------------
-    def _udp_peer(self, addr: Any) -> _Peer:
-        peer = self._udp_peers.get(addr)
+    def _udp_peer(self, addr: Any, peer: _Peer | None = None) -> _Peer:
+        """The peer of ``addr``, created (or ``peer`` adopted) on first use."""
+        known = self._udp_peers.get(addr)
+        if known is not None:
+            return known
+        udp = self._udp
+        assert udp is not None
+
+        def write(data: bytes, addr: Any = addr) -> None:
+            if data and self._udp is not None:
+                udp.sendto(data, addr)
+
         if peer is None:
-            udp = self._udp
-            assert udp is not None
-
-            def write(data: bytes, addr: Any = addr) -> None:
-                if data and self._udp is not None:
-                    udp.sendto(data, addr)
-
-            peer = _Peer(UDP_LINK, write)
-            self._udp_peers[addr] = peer
+            peer = _Peer(UDP_LINK, write, self._signing_key)
+        else:
+            peer.write = write
+        self._udp_peers[addr] = peer
         return peer
 
     def _udp_datagram(self, data: bytes, addr: Any) -> None:
-        peer = self._udp_peer(addr)
-        self._receive(peer, data, datagram=True)
+        if self._signing_key is not None and addr not in self._udp_peers:
+            # With signing, an address becomes a peer (is sent telemetry) only once it sent a validly
+            # signed frame: an unsigned or wrongly keyed sender learns nothing from us.
+            if self.config.faults.loss > 0.0 and self.faults.drop_incoming():
+                return
+            probe = _Peer(UDP_LINK, lambda _data: None, self._signing_key)
+            msgs = self._parse(probe, data, datagram=True)
+            if msgs:
+                self._handle(self._udp_peer(addr, probe), msgs, addr)
+            return
+        self._receive(self._udp_peer(addr), data, datagram=True, addr=addr)
+
+    def _count_bad(self, reason: str) -> None:
+        if "signature" in reason.lower():
+            self.rejected_signature += 1
+        else:
+            self.rejected_corrupt += 1
 
     async def _tcp_client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         link = self._next_link
@@ -395,7 +435,7 @@ class MockAutopilot:
             elif not writer.is_closing() and writer.transport.get_write_buffer_size() < _TCP_BACKLOG_BYTES:
                 writer.write(data)  # a client that stops reading loses telemetry, like a full serial buffer
 
-        peer = _Peer(link, write)
+        peer = _Peer(link, write, self._signing_key)
         self._tcp_peers[link] = peer
         self.autopilot.add_link(link)
         try:
@@ -403,7 +443,7 @@ class MockAutopilot:
                 data = await reader.read(65536)
                 if not data:
                     break
-                self._receive(peer, data)
+                self._receive(peer, data, addr=link)
         except (ConnectionError, asyncio.CancelledError):
             pass
         finally:
@@ -411,21 +451,37 @@ class MockAutopilot:
             self.autopilot.remove_link(link)
             writer.close()
 
-    def _receive(self, peer: _Peer, data: bytes, datagram: bool = False) -> None:
+    def _receive(self, peer: _Peer, data: bytes, datagram: bool = False, addr: Any = None) -> None:
         if self.config.faults.loss > 0.0 and self.faults.drop_incoming():
             return
+        msgs = self._parse(peer, data, datagram)
+        if msgs:
+            self._handle(peer, msgs, addr)
+
+    def _parse(self, peer: _Peer, data: bytes, datagram: bool) -> list[mavlink.MAVLink_message]:
         try:
-            msgs = parse_datagram(peer.mav, data) if datagram else peer.mav.parse_buffer(data)
+            if datagram:
+                return parse_datagram(peer.mav, data, self._count_bad)
+            msgs = peer.mav.parse_buffer(data) or []
         except Exception:  # malformed traffic must never stop the mock  # noqa: BLE001
-            return
-        if not msgs:
-            return
+            return []
+        good = []
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA":
+                self._count_bad(str(getattr(msg, "reason", "")))
+            else:
+                good.append(msg)
+        return good
+
+    def _handle(self, peer: _Peer, msgs: list[mavlink.MAVLink_message], addr: Any) -> None:
         ap = self.autopilot
         lockstep = self.config.lockstep
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
                 continue
             self.received += 1
+            if self.on_received is not None:
+                self.on_received(msg, addr)
             replies = ap.handle(msg, peer.link)
             if replies:
                 self._emit(replies)

@@ -28,7 +28,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from pf_offboard.app.encoders import position_setpoint, yaw_of
-from pf_offboard.app.estimator import StateEstimate
+from pf_offboard.app.estimator import StateEstimate, flight_clock_s
 from pf_offboard.app.link import Link
 from pf_offboard.app.pipeline import Pipeline, Step, time_boot_ms
 from pf_offboard.app.profiles import Autopilot, ModeRequest, Profile, is_armed
@@ -246,6 +246,7 @@ class Bridge:
         self.acks: dict[int, int] = {}
         self.params: dict[str, float] = {}
         self.activation_time_s: float | None = None
+        self._activation_clock_s: float | None = None  # the same instant on the estimator's continuous clock
         self.result: FlightResult | None = None
         self.last_step: Step | None = None
         self.steps = 0
@@ -493,7 +494,9 @@ class Bridge:
             self.on_step(step)
         rec = step.record
         laps = self.laps.update(rec.eta1_m)
-        elapsed = rec.time_s - (self.activation_time_s if self.activation_time_s is not None else rec.time_s)
+        # --duration on one continuous clock (an autopilot clock jump must not end or stretch it)
+        now_clock = flight_clock_s(step.estimate)
+        elapsed = now_clock - (self._activation_clock_s if self._activation_clock_s is not None else now_clock)
         reason = end_reason(
             self.options.end, laps, elapsed, self.path_closed, rec.lam, self.lam_max, self.pipeline.speed_ref_m_s, rec.eta2_m_s
         )
@@ -590,6 +593,7 @@ class Bridge:
         """From now on the streamed setpoints are meant to fly (mode switch requested)."""
         est = self.pipeline.estimator.latest
         self.activation_time_s = est.time_s if est is not None else None
+        self._activation_clock_s = flight_clock_s(est) if est is not None else None
         self._event = event
         self.phase = Phase.ENGAGING
 
@@ -599,6 +603,7 @@ class Bridge:
         est = self.pipeline.estimator.latest
         if self.activation_time_s is None and est is not None:
             self.activation_time_s = est.time_s
+            self._activation_clock_s = flight_clock_s(est)
         self._event = self._event or "activated"
         self.phase = Phase.FOLLOWING
         self.offboard_seen = True

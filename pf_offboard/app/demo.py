@@ -26,6 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4", help="mock profile (default px4)")
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/demo-<UTC timestamp>/")
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
+    parser.add_argument("--signing-key", metavar="FILE",
+                        help="MAVLink 2 signing on both ends (the mock and the app) with this key file")  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no status line")
 
 
@@ -62,6 +64,10 @@ def run(args: argparse.Namespace) -> int:
 
         make_dir(log_dir, "--log-dir")  # before the mock is started
     config = load_config(config_path)
+    if args.signing_key:
+        from pf_offboard.app.fly import signing_key_from_args
+
+        signing_key_from_args(args)  # an unreadable key file is bad input, found before the mock starts
     rate_hz = config.flight.setpoint_rate_hz
     # PX4: lockstep (one physics step per setpoint: as fast as the host allows, deterministic).
     # ArduPilot takes off on its own (NAV_TAKEOFF) while we send nothing, which a lockstep clock
@@ -76,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
         tcp_port=None,
         lockstep=lockstep,
         lockstep_dt_s=1.0 / rate_hz,
+        signing_key_file=args.signing_key,
     )
     clock = f"lockstep {1000.0 / rate_hz:g} ms" if lockstep else "real time"
     print(f"pf-offboard demo: sitl-mock ({args.autopilot}, {clock}) on loopback; "
@@ -94,6 +101,8 @@ def run(args: argparse.Namespace) -> int:
             flags.append("--set-guid-options")
         if args.quiet:
             flags.append("--quiet")
+        if args.signing_key:
+            flags += ["--signing-key", args.signing_key]
         outcome = fly(parser.parse_args(flags))
     if outcome.exit_code == 0 and outcome.log_dir is not None and not args.no_plots:
         try:

@@ -8,6 +8,24 @@ used from then on, so one sample is never counted twice); attitude and body rate
 ATTITUDE_QUATERNION (or ODOMETRY's pose when that is the source). Non-finite or malformed
 samples are rejected and counted, never passed to the controller; so are duplicated or reordered
 ones (a sample time not newer than the last), which are not fresh.
+
+Plausibility (telemetry can be late, duplicated, corrupt in ways the CRC passes, or spoofed):
+
+- time: each stream (position/velocity; ATTITUDE_QUATERNION) keeps its own clock. A sample up to
+  FORWARD_JUMP_S newer than the last accepted one is accepted; one older by less than
+  REORDER_WINDOW_S (or equal) is a duplicate / reordered datagram, rejected. Anything else — a
+  jump forward beyond FORWARD_JUMP_S (a future-dated sample) or back beyond the window (a reboot)
+  — is a *candidate* new timeline, rejected, and adopted only when the very next sample of the
+  stream confirms it (newer than the candidate by at most CONFIRM_WINDOW_S). A sample continuing
+  the accepted timeline drops the candidate: one future-dated sample cannot make the genuine
+  ones "not newer", and spoofs interleaved with the genuine stream never make a "reboot".
+- position: a sample farther from the last accepted one than the vehicle could have moved
+  (``JUMP_MARGIN_M + (speed + JUMP_SPEED_SLACK_M_S) * dt``) is rejected (``rejected_jumps``);
+  if the next sample confirms the new place it is accepted as an estimator reset
+  (``position_resets``, ``reset_pending`` with ``reset_reason``). ODOMETRY's reset_counter
+  announces a reset itself and is believed.
+- ``StateEstimate.clock_s`` is one continuous clock over the flight (jumps excluded), for
+  durations: a clock jump does not make a duration span two clocks.
 """
 
 from __future__ import annotations
@@ -37,6 +55,13 @@ class StateEstimate:
     q_enu_flu: NDArray[np.float64] | None  # (w, x, y, z) body FLU -> world ENU; None until known
     rates_flu_rad_s: NDArray[np.float64] | None
     sample: int  # count of position/velocity samples accepted so far
+    # continuous time of the accepted samples (s from the first), clock jumps excluded; None: time_s
+    clock_s: float | None = None
+
+
+def flight_clock_s(est: StateEstimate) -> float:
+    """The estimate's time on one continuous clock (for durations across autopilot clock jumps)."""
+    return est.clock_s if est.clock_s is not None else est.time_s
 
 
 def _finite(*values: float) -> bool:
@@ -62,18 +87,64 @@ def _unit_quat(q: Any) -> NDArray[np.float64] | None:
 
 
 # A sample not newer than the last one, by less than this, is a duplicated or reordered datagram
-# (not fresh: it must not step the controller or feed the stale-state watchdog). Older by more,
-# the autopilot's boot clock restarted (a reboot): accepted, following starts over from it.
+# (not fresh: it must not step the controller or feed the stale-state watchdog).
 REORDER_WINDOW_S = 10.0
+# A sample newer than the last accepted one by more than this is not simply the next one (a blackout
+# longer than this has already ended following through the state timeout, <= 5 s): a candidate.
+FORWARD_JUMP_S = 1.0
+# A candidate timeline is adopted when the next sample is newer than it by at most this.
+CONFIRM_WINDOW_S = 1.0
+# Position plausibility: a vehicle moves at most (speed + slack) * dt between samples, plus a margin
+# for estimator noise and small corrections. 1 m: PX4 / ArduPilot fuse GPS in steps well below it;
+# 5 m/s: a hard manoeuvre's speed change over one sample interval, generously.
+JUMP_MARGIN_M = 1.0
+JUMP_SPEED_SLACK_M_S = 5.0
+
+NEW, OLD, PENDING, REANCHOR = "new", "old", "pending", "reanchor"
+
+
+class _Clock:
+    """Sample-time acceptance of one stream (see the module docstring). Pure."""
+
+    def __init__(self) -> None:
+        self.last_s: float | None = None
+        self.candidate_s: float | None = None
+
+    def classify(self, t_s: float) -> str:
+        last = self.last_s
+        if last is None:
+            return NEW
+        d = t_s - last
+        if 0.0 < d <= FORWARD_JUMP_S:
+            return NEW
+        if -REORDER_WINDOW_S < d <= 0.0:
+            return OLD
+        c = self.candidate_s
+        if c is not None and 0.0 < t_s - c <= CONFIRM_WINDOW_S:
+            return REANCHOR
+        return PENDING
+
+    def commit(self, t_s: float, verdict: str) -> None:
+        """Record an accepted sample (NEW / REANCHOR) or a new candidate (PENDING)."""
+        if verdict == PENDING:
+            self.candidate_s = t_s
+        elif verdict in (NEW, REANCHOR):
+            self.last_s, self.candidate_s = t_s, None
 
 
 class Estimator:
     """Fold telemetry into a :class:`StateEstimate`.
 
     :meth:`on_message` returns True when the message brought a fresh position/velocity sample
-    (the pipeline steps the controller exactly then). ``reset_pending`` turns True when ODOMETRY
-    reports an estimator reset (``reset_counter`` changed): the caller resets the follower's warm
-    start, since the position may have jumped.
+    (the pipeline steps the controller exactly then). ``reset_pending`` turns True when the
+    position may have jumped (ODOMETRY ``reset_counter`` changed, a confirmed position jump, a
+    confirmed clock jump); ``reset_reason`` says which. The caller resets the follower's warm start.
+
+    Counters for monitors (e.g. a flight-envelope check ending following on an estimator reset):
+    ``rejected`` (all refused samples), ``rejected_old`` (duplicated / reordered),
+    ``rejected_jumps`` (implausible position jumps refused), ``position_resets`` (jumps confirmed
+    and accepted as estimator resets), ``clock_jumps`` (candidate timelines refused),
+    ``clock_reanchors`` (timelines adopted); ``last_event`` describes the latest of these.
     """
 
     def __init__(self, source: str = "auto") -> None:
@@ -84,9 +155,20 @@ class Estimator:
         self._rates_frd: NDArray[np.float64] | None = None
         self._latest: StateEstimate | None = None
         self._reset_counter: int | None = None
+        self._pos_clock = _Clock()
+        self._att_clock = _Clock()
+        self._jump_candidate: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None
+        self._clock_s = 0.0
         self.samples = 0
         self.rejected = 0
+        self.rejected_old = 0
+        self.rejected_jumps = 0
+        self.position_resets = 0
+        self.clock_jumps = 0
+        self.clock_reanchors = 0
+        self.last_event = ""
         self.reset_pending = False
+        self.reset_reason = ""
 
     @property
     def source(self) -> str:
@@ -107,19 +189,73 @@ class Estimator:
             return self._odometry(msg)
         return False
 
+    def _reset(self, reason: str) -> None:
+        self.reset_pending = True
+        self.reset_reason = reason
+        self.last_event = reason
+
+    def _time_verdict(self, clock: _Clock, time_s: float, what: str) -> str:
+        """Classify a sample time; count and commit the refusals (OLD / PENDING)."""
+        verdict = clock.classify(time_s)
+        if verdict == OLD:
+            self.rejected += 1
+            self.rejected_old += 1
+        elif verdict == PENDING:
+            self.rejected += 1
+            self.clock_jumps += 1
+            last = clock.last_s if clock.last_s is not None else math.nan
+            self.last_event = f"{what} time jumped {time_s - last:+.3f} s; sample refused until confirmed"
+            clock.commit(time_s, verdict)
+        return verdict
+
     def _attitude(self, msg: Any) -> None:
         q = _unit_quat((msg.q1, msg.q2, msg.q3, msg.q4))
         rates = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
         if q is None or not _finite(*rates):
             self.rejected += 1
             return
+        t = msg.time_boot_ms * 1e-3
+        verdict = self._time_verdict(self._att_clock, t, "attitude")
+        if verdict in (OLD, PENDING):
+            return  # an older attitude than the one we have (or an unconfirmed clock) is never used
+        self._att_clock.commit(t, verdict)
+        if verdict == REANCHOR:
+            self.clock_reanchors += 1
         self._q_ned_frd = q
         self._rates_frd = np.array(rates, dtype=float)
 
-    def _accept(self, time_s: float, pos_ned: NDArray[np.float64], vel_ned: NDArray[np.float64], source: str) -> bool:
+    def _plausible(self, time_s: float, pos_ned: NDArray[np.float64], vel_ned: NDArray[np.float64], verdict: str, announced: bool) -> bool:
+        """Position-jump check of a sample whose time was accepted; False: refused (counted)."""
+        last = self._latest
+        if last is None or verdict == REANCHOR or announced:
+            self._jump_candidate = None
+            return True
+        prev_pos = frames.enu_to_ned(last.position_enu_m)
+        prev_speed = float(np.linalg.norm(last.velocity_enu_m_s))
+        if _consistent(prev_pos, prev_speed, last.time_s, pos_ned, vel_ned, time_s):
+            self._jump_candidate = None  # continues the accepted track (drops an unconfirmed jump)
+            return True
+        jump_m = float(np.linalg.norm(pos_ned - prev_pos))
+        c = self._jump_candidate
+        if c is not None and 0.0 < time_s - c[0] <= CONFIRM_WINDOW_S and _consistent(c[1], float(np.linalg.norm(c[2])), c[0], pos_ned, vel_ned, time_s):
+            self._jump_candidate = None
+            self.position_resets += 1
+            self._reset(f"position jumped {jump_m:.2f} m in {time_s - last.time_s:.3f} s (confirmed: estimator reset)")
+            return True
+        self._jump_candidate = (time_s, pos_ned, vel_ned)
+        self.rejected += 1
+        self.rejected_jumps += 1
+        self.last_event = f"position jumped {jump_m:.2f} m in {time_s - last.time_s:.3f} s; refused until confirmed"
+        return False
+
+    def _accept(self, time_s: float, pos_ned: NDArray[np.float64], vel_ned: NDArray[np.float64], source: str, verdict: str) -> bool:
         if self._source == "auto":
             self._source = source  # lock onto the first source seen
         self.samples += 1
+        last = self._latest
+        if last is not None and verdict == NEW:
+            self._clock_s += time_s - last.time_s  # a confirmed jump (REANCHOR) adds no time
+        self._pos_clock.commit(time_s, verdict)
         q = None if self._q_ned_frd is None else frames.quat_ned_frd_to_enu_flu(self._q_ned_frd)
         rates = None if self._rates_frd is None else frames.frd_to_flu(self._rates_frd)
         self._latest = StateEstimate(
@@ -129,34 +265,48 @@ class Estimator:
             q_enu_flu=q,
             rates_flu_rad_s=rates,
             sample=self.samples,
+            clock_s=self._clock_s,
         )
         return True
 
-    def _not_newer(self, time_s: float) -> bool:
-        """True (and counted as rejected) for a duplicated or reordered sample."""
+    def _position_time(self, time_s: float) -> str | None:
+        """The time verdict of a position sample, or None when it is refused."""
+        verdict = self._time_verdict(self._pos_clock, time_s, "state")
+        return None if verdict in (OLD, PENDING) else verdict
+
+    def _reanchored(self, time_s: float) -> None:
+        """A confirmed new timeline: the continuous clock does not count the jump."""
         last = self._latest
-        if last is not None and 0.0 <= last.time_s - time_s < REORDER_WINDOW_S:
-            self.rejected += 1
-            return True
-        return False
+        self.clock_reanchors += 1
+        jump = time_s - last.time_s if last is not None else 0.0
+        if jump > 0.0:
+            # forward and confirmed: the stream resumed after a gap (the state timeout, not the
+            # estimator, decides whether following survives one); no position reset implied
+            self.last_event = f"state resumed {jump:.3f} s later (confirmed by the next sample)"
+            return
+        self._reset(f"autopilot clock jumped {jump:+.3f} s (confirmed: reboot or clock reset)")
 
     def _local_position(self, msg: Any) -> bool:
         values = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz)
-        if self._not_newer(msg.time_boot_ms * 1e-3):
-            return False
+        t = msg.time_boot_ms * 1e-3
         if not _finite(*values):
             self.rejected += 1
             return False
-        return self._accept(
-            msg.time_boot_ms * 1e-3, np.array(values[:3]), np.array(values[3:]), "local_position"
-        )
+        verdict = self._position_time(t)
+        if verdict is None:
+            return False
+        pos, vel = np.array(values[:3], dtype=float), np.array(values[3:], dtype=float)
+        if not self._plausible(t, pos, vel, verdict, announced=False):
+            return False
+        if verdict == REANCHOR:
+            self._reanchored(t)
+        return self._accept(t, pos, vel, "local_position", verdict)
 
     def _odometry(self, msg: Any) -> bool:
         if msg.frame_id != MAV_FRAME_LOCAL_NED:  # LOCAL_FRD is heading-aligned, not NED
             self.rejected += 1
             return False
-        if self._not_newer(msg.time_usec * 1e-6):
-            return False
+        t = msg.time_usec * 1e-6
         pos = np.array((msg.x, msg.y, msg.z), dtype=float)
         vel = np.array((msg.vx, msg.vy, msg.vz), dtype=float)
         q = _unit_quat(msg.q)
@@ -164,13 +314,30 @@ class Estimator:
         if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(vel))) or q is None:
             self.rejected += 1
             return False
+        verdict = self._position_time(t)
+        if verdict is None:
+            return False
         if msg.child_frame_id == MAV_FRAME_BODY_FRD:
             vel = rotate(q, vel)  # PX4 reports ODOMETRY velocity in the body frame
+        counter = int(msg.reset_counter)
+        announced = self._reset_counter is not None and counter != self._reset_counter
+        if not self._plausible(t, pos, vel, verdict, announced):
+            return False
+        if verdict == REANCHOR:
+            self._reanchored(t)
         self._q_ned_frd = q
         if np.all(np.isfinite(rates)):
             self._rates_frd = rates
-        counter = int(msg.reset_counter)
-        if self._reset_counter is not None and counter != self._reset_counter:
-            self.reset_pending = True
+        if announced:
+            self._reset(f"estimator reset_counter {self._reset_counter} -> {counter}")
         self._reset_counter = counter
-        return self._accept(msg.time_usec * 1e-6, pos, vel, "odometry")
+        return self._accept(t, pos, vel, "odometry", verdict)
+
+
+def _consistent(
+    p0_ned: NDArray[np.float64], speed0_m_s: float, t0_s: float, p1_ned: NDArray[np.float64], v1_ned: NDArray[np.float64], t1_s: float
+) -> bool:
+    """Could a vehicle at p0 (speed0) at t0 be at p1 (velocity v1) at t1? (generous bound)"""
+    dt = max(t1_s - t0_s, 0.0)
+    allowed = JUMP_MARGIN_M + (max(speed0_m_s, float(np.linalg.norm(v1_ned))) + JUMP_SPEED_SLACK_M_S) * dt
+    return float(np.linalg.norm(p1_ned - p0_ned)) <= allowed

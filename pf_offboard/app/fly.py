@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import datetime as _dt
+import functools
 import gc
 import math
 import signal
@@ -17,6 +18,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any, TextIO
 
 from pf_offboard.errors import InputError, LinkError
@@ -50,6 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="position/velocity telemetry to follow with")  # fmt: skip
     parser.add_argument("--set-guid-options", action="store_true",
                         help="ArduPilot: set the GUID_OPTIONS bits the output mode needs instead of refusing")  # fmt: skip
+    parser.add_argument("--signing-key", metavar="FILE",
+                        help="MAVLink 2 signing: sign what we send, drop unsigned / wrongly signed frames. FILE: 32 raw "
+                             "bytes, 64 hex digits or a passphrase (SHA-256, as MAVProxy); see the README")  # fmt: skip
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/<UTC timestamp>/")
     parser.add_argument("--quiet", action="store_true", help="no status line")
 
@@ -156,16 +161,30 @@ def default_log_dir() -> Path:
 
 @dataclass
 class FlyOutcome:
-    """What ``fly`` hands back to callers (``demo``, tests)."""
+    """What ``fly`` hands back to callers (``demo``, tests).
+
+    The steps are not kept in memory during the flight (the summary is computed as they stream to
+    the CSV); :attr:`records` reads them back from the log on demand.
+    """
 
     exit_code: int
     reason: str
     log_dir: Path | None
-    records: list[Any]
     summary: Any | None
     activation_time_s: float | None
     breach: Any | None = None  # pf_offboard.safety.Verdict when the envelope ended the flight
     breach_time_s: float | None = None  # vehicle time it was detected
+    link_counters: Any | None = None  # pf_offboard.app.link.LinkCounters
+    estimator: Any | None = None  # the flight's Estimator (its plausibility counters)
+
+    @functools.cached_property
+    def records(self) -> list[Any]:
+        """Every step, read from the log the first time it is asked for (then kept)."""
+        if self.log_dir is None:
+            return []
+        from pf_offboard.logs.steplog import read_steplog
+
+        return read_steplog(self.log_dir / "flight.csv")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -173,12 +192,31 @@ def run(args: argparse.Namespace) -> int:
     return outcome.exit_code
 
 
-def fly(args: argparse.Namespace, status_stream: TextIO | None = None) -> FlyOutcome:
-    """Parse, validate and fly; prints the summary and the log path. Never hangs on a dead link."""
+def signing_key_from_args(args: argparse.Namespace) -> bytes | None:
+    """The ``--signing-key`` file's key (InputError naming the flag when unreadable)."""
+    path = getattr(args, "signing_key", None)
+    if path is None:
+        return None
+    from pf_offboard.app.signing import read_key_file
+
+    try:
+        return read_key_file(path)
+    except OSError as exc:
+        raise InputError("--signing-key", f"cannot read {path}: {exc.strerror or exc}") from None
+    except ValueError as exc:
+        raise InputError("--signing-key", f"{path}: {exc}") from None
+
+
+def fly(args: argparse.Namespace, status_stream: TextIO | None = None, on_start: Callable[[Any], None] | None = None) -> FlyOutcome:
+    """Parse, validate and fly; prints the summary and the log path. Never hangs on a dead link.
+
+    ``on_start(bridge)`` (optional) is called once the flight's bridge exists (benchmarks watch it).
+    """
     from pf_offboard.app.link import parse_endpoint
     from pf_offboard.config import load_config
 
     endpoint = parse_endpoint(args.connect)  # InputError before anything is opened
+    signing_key = signing_key_from_args(args)
     config = load_config(args.config)
     _heights_from_config(args, config)
     _check_args(args)
@@ -190,13 +228,16 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None) -> FlyOut
         make_dir(args.log_dir, "--log-dir")  # an unwritable log directory is bad input: found before connecting
     stream = status_stream if status_stream is not None else sys.stderr
     try:
-        return asyncio.run(_fly(args, endpoint, config, settings, stream, fence))
+        return asyncio.run(_fly(args, endpoint, config, settings, stream, fence, signing_key, on_start))
     except LinkError as exc:
         print(f"pf-offboard fly: link error: {exc}", file=stream)
-        return FlyOutcome(3, str(exc), None, [], None, None)
+        return FlyOutcome(3, str(exc), None, None, None)
 
 
-async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: FlightSettings, stream: TextIO, fence: Any = None) -> FlyOutcome:
+async def _fly(
+    args: argparse.Namespace, endpoint: Any, config: Any, settings: FlightSettings, stream: TextIO, fence: Any = None,
+    signing_key: bytes | None = None, on_start: Callable[[Any], None] | None = None,
+) -> FlyOutcome:  # fmt: skip
     from pymavlink.dialects.v20 import common as mavlink2
 
     from pf_offboard.app.bridge import Bridge, BridgeOptions, EndSpec
@@ -207,12 +248,14 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     from pf_offboard.app.profiles import Autopilot, select_profile
     from pf_offboard.control import PathFollower
     from pf_offboard.logs.flightlog import FlightLog
-    from pf_offboard.logs.steplog import read_steplog
-    from pf_offboard.logs.summary import summarize
+    from pf_offboard.logs.summary import SummaryAccumulator
     from pf_offboard.safety import EnvelopeMonitor, SafetyConfig
 
     follower = PathFollower.from_config(config)
-    link = Link.open(endpoint)
+    link = Link.open(endpoint, signing_key=signing_key)
+    # state that waited in the socket longer than the state timeout is never flown
+    link.max_state_age_s = settings.state_timeout_s
+    summary_acc = SummaryAccumulator()  # running sums: the steps themselves go to the CSV only
     log: FlightLog | None = None
     try:
         target = await link.wait_heartbeat(args.heartbeat_timeout, args.target_system)
@@ -250,10 +293,12 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
         monitor = EnvelopeMonitor(safety, fence if fence is not None else envelope_fence(config), path.length_m, path.closed)
         bridge = Bridge(
             link, profile, pipeline, options, path.length_m, path.closed, path.lam_max,
-            on_step=lambda step: flight_log.step(step.record),  # the CSV, not memory: flights can be long
+            on_step=lambda step: (flight_log.step(step.record), summary_acc.add(step.record)),  # not kept: flights can be long
             status_stream=stream, monitor=monitor,
         )  # fmt: skip
         link.start_reading(bridge.on_message)
+        if on_start is not None:
+            on_start(bridge)
 
         async def setup() -> None:
             # telemetry at the rates we need: state at the setpoint rate (a fresh sample drives
@@ -308,11 +353,12 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
         if log is not None:
             log.close()
     assert log is not None
-    records = read_steplog(log.paths.steps_csv)
-    summary = summarize(records) if records else None
+    summary = summary_acc.result() if summary_acc.steps else None
     _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
-    return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s,
-                      result.breach, result.breach_time_s)  # fmt: skip
+    return FlyOutcome(
+        result.exit_code, result.reason, log.paths.tlog.parent, summary, result.activation_time_s, result.breach,
+        result.breach_time_s, link.counters, pipeline.estimator,
+    )  # fmt: skip
 
 
 def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[type-arg]
@@ -340,15 +386,26 @@ async def _check_guid_options(bridge: Any, required: int, allow_set: bool, outpu
 
 
 def _report(stream: TextIO, reason: str, code: int, summary: Any, log_dir: Path, bridge: Any) -> None:
-    print(f"pf-offboard fly: {reason} (exit {code})", file=stream)
+    """The end-of-flight report on ``stream``: outcome, safety, summary, what the link and estimator refused."""
+    lines = [f"pf-offboard fly: {reason} (exit {code})"]
     if bridge.breach is not None:
         when = f" at t = {bridge.breach_time_s:.2f} s" if bridge.breach_time_s is not None else ""
-        print(f"  safety: {bridge.breach.kind.value}{when}: {bridge.breach.reason}", file=stream)
+        lines.append(f"  safety: {bridge.breach.kind.value}{when}: {bridge.breach.reason}")
     if bridge.monitor is not None:
-        print(f"  safety: max measured tilt {math.degrees(bridge.monitor.max_tilt_seen_rad):.1f} deg; fence {bridge.monitor.fence.describe()}", file=stream)
+        lines.append(f"  safety: max measured tilt {math.degrees(bridge.monitor.max_tilt_seen_rad):.1f} deg; fence {bridge.monitor.fence.describe()}")
     if bridge.pipeline.replaced_steps:
-        print(f"  safe hold sent instead of a non-finite command {bridge.pipeline.replaced_steps} times", file=stream)
+        lines.append(f"  safe hold sent instead of a non-finite command {bridge.pipeline.replaced_steps} times")
     if summary is not None:
-        for line in summary.lines():
-            print("  " + line, file=stream)
+        lines += ["  " + line for line in summary.lines()]
+    link = bridge.link
+    lines.append(f"  link                {'signed' if link.signing else 'unsigned'}; {link.counters.line()}")
+    est = bridge.pipeline.estimator
+    if est.rejected:
+        lines.append(
+            f"  state samples       rejected {est.rejected}: {est.rejected_old} old/duplicated, {est.clock_jumps} clock jumps "
+            f"({est.clock_reanchors} confirmed), {est.rejected_jumps} position jumps ({est.position_resets} confirmed as resets)"
+            + (f"; last: {est.last_event}" if est.last_event else "")
+        )
+    for line in lines:
+        print(line, file=stream)
     print(f"logs: {log_dir}", file=stream)

@@ -8,8 +8,14 @@ application in the same event-loop callback. Sending is a non-blocking socket wr
 from __future__ import annotations
 
 import asyncio
+import collections
+import dataclasses
 import os
 import re
+import socket
+import struct
+import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -102,14 +108,62 @@ def is_vehicle_heartbeat(msg: Any) -> bool:
     )
 
 
+# At most this many messages are decoded per wake-up of the reader, then the event loop runs the
+# other tasks (setpoint keep-alive, stale-state watchdog, HEARTBEAT) before reading on: a
+# telemetry flood must not starve them (draining until the socket is empty never yields while a
+# sender keeps it full). 50 is a quarter of a 250 Hz second of state; decoding them takes ~1 ms.
+MAX_MESSAGES_PER_WAKEUP = 50
+# State messages; when one waited in the socket longer than the state timeout it is dropped
+# unread (see Link.max_state_age_s): a backlog is never flown.
+STATE_MESSAGES = frozenset({"LOCAL_POSITION_NED", "ODOMETRY", "ATTITUDE_QUATERNION"})
+# Linux: kernel receive timestamps of UDP datagrams (socket(7)); not exported by Python's socket.
+_SO_TIMESTAMPNS = 35
+_TIMESPEC = struct.Struct("@ll")
+# A datagram was read but yielded no message to handle (another sender, a partial frame).
+_SKIPPED: Any = ("skipped",)
+
+
+@dataclass(frozen=True)
+class LinkCounters:
+    """What the link refused or skipped (counts of messages, or datagrams for ``foreign_peer``)."""
+
+    foreign_peer: int = 0  # UDP datagrams from an address other than the locked autopilot peer
+    not_target: int = 0  # messages from another system / component than the target autopilot
+    not_autopilot_heartbeat: int = 0  # HEARTBEATs with the target's ids but not an autopilot's
+    bad_signature: int = 0  # unsigned or wrongly signed frames (signing on)
+    bad_data: int = 0  # CRC / framing errors
+    stale_state: int = 0  # state samples that waited in the socket longer than the state timeout
+    reader_yields: int = 0  # wake-ups that stopped at MAX_MESSAGES_PER_WAKEUP with more waiting
+
+    @property
+    def rejected(self) -> int:
+        """Messages refused as not coming from the target autopilot (spoofs, other peers)."""
+        return self.foreign_peer + self.not_target + self.not_autopilot_heartbeat + self.bad_signature
+
+    def line(self) -> str:
+        return (
+            f"rejected {self.foreign_peer} from another address, {self.not_target} from another component, "
+            f"{self.not_autopilot_heartbeat} non-autopilot HEARTBEATs, {self.bad_signature} badly signed; "
+            f"{self.bad_data} corrupt, {self.stale_state} stale state dropped, {self.reader_yields} reader yields"
+        )
+
+
 class Link:
     """An open MAVLink connection. Create with :meth:`open`; close with :meth:`close`.
 
-    ``on_message`` (set by the caller) receives every decoded message from the target system;
-    ``on_sent`` / ``on_received`` (optional) see every frame for the telemetry log.
+    ``on_message`` (set by the caller) receives every decoded message from the target;
+    ``on_sent`` / ``on_received`` (optional) see every frame sent / accepted for the telemetry log.
+
+    Authority: before the target is known, every HEARTBEAT is looked at (to find it). Once it is
+    known (:meth:`wait_heartbeat`), only the target autopilot component is believed: messages from
+    other systems or components are dropped, a HEARTBEAT with the target's ids that is not an
+    autopilot's (a GCS, a companion: what a spoofer sends to fake a mode change) is dropped, and on
+    UDP the link is locked to the address the target's HEARTBEAT came from: datagrams from any
+    other address are dropped unread and counted, and ``udpin`` answers only that address. With a
+    signing key, unsigned or wrongly signed frames are dropped by the parser and counted.
     """
 
-    def __init__(self, endpoint: Endpoint, conn: Any) -> None:
+    def __init__(self, endpoint: Endpoint, conn: Any, signing: bool = False) -> None:
         self.endpoint = endpoint
         self._conn = conn
         self.target: VehicleId | None = None
@@ -119,10 +173,36 @@ class Link:
         self._reading = False
         self.error: LinkError | None = None
         self.first_heartbeat: Any = None  # the HEARTBEAT that identified the target
+        self.signing = signing
+        # UDP: read datagrams ourselves (recvmsg), so each message is attributed to the address it
+        # came from (pymavlink's mavudp keeps no per-message sender: ``last_address`` is only set
+        # in broadcast mode, ``clients`` collects every sender and ``write`` answers them all).
+        self._udp_sock: socket.socket | None = getattr(conn, "port", None) if endpoint.kind in ("udpin", "udpout") else None
+        self._kernel_stamps = False
+        if self._udp_sock is not None and sys.platform.startswith("linux"):
+            try:
+                self._udp_sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+                self._kernel_stamps = True
+            except OSError:
+                pass
+        self.peer: tuple[str, int] | None = None  # UDP address of the target, locked at identification
+        self._pending: collections.deque[tuple[Any, Any, float]] = collections.deque()
+        self._resume: asyncio.Handle | None = None
+        self._last_addr: Any = None  # sender of the message being handled
+        # State that waited longer than this in the socket is dropped unread (None: never).
+        self.max_state_age_s: float | None = None
+        self._n = {f.name: 0 for f in dataclasses.fields(LinkCounters)}
+
+    @property
+    def counters(self) -> LinkCounters:
+        return LinkCounters(**self._n)
 
     @classmethod
-    def open(cls, endpoint: Endpoint, source_system: int = 1) -> Link:
-        """Open the endpoint (binds / connects; no traffic yet). Raises :class:`LinkError`."""
+    def open(cls, endpoint: Endpoint, source_system: int = 1, signing_key: bytes | None = None) -> Link:
+        """Open the endpoint (binds / connects; no traffic yet). Raises :class:`LinkError`.
+
+        ``signing_key`` (32 bytes): sign everything we send and accept only frames signed with it.
+        """
         try:
             conn = mavutil.mavlink_connection(
                 endpoint.mavutil_url(),
@@ -140,17 +220,29 @@ class Link:
         if fd is None:
             conn.close()
             raise LinkError(f"{endpoint}: connection has no file descriptor to wait on")
-        return cls(endpoint, conn)
+        if signing_key is not None:
+            if len(signing_key) != 32:
+                conn.close()
+                raise LinkError(f"signing key must be 32 bytes, got {len(signing_key)}")
+            # allow_unsigned_callback None: an unsigned frame is refused like a wrongly signed one
+            conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=None)
+        return cls(endpoint, conn, signing=signing_key is not None)
 
     # ------------------------------------------------------------------ receiving
     def start_reading(self, handler: Callable[[Any], None]) -> None:
         """Call ``handler(msg)`` from the event loop for every message from the target."""
         self._handler = handler
         if not self._reading:
-            asyncio.get_running_loop().add_reader(self._conn.fd, self._drain)
+            loop = asyncio.get_running_loop()
+            loop.add_reader(self._conn.fd, self._drain)
             self._reading = True
+            if self._pending and self._resume is None:  # decoded before a previous stop_reading
+                self._resume = loop.call_soon(self._drain)
 
     def stop_reading(self) -> None:
+        if self._resume is not None:
+            self._resume.cancel()
+            self._resume = None
         if self._reading:
             try:
                 asyncio.get_running_loop().remove_reader(self._conn.fd)
@@ -158,24 +250,104 @@ class Link:
                 pass
             self._reading = False
 
+    def _next(self) -> tuple[Any, Any, float] | None:
+        """The next (message, sender address or None, seconds it waited in the socket); None when
+        nothing is waiting; ``_SKIPPED`` for a datagram read that gave nothing to handle."""
+        if self._pending:
+            return self._pending.popleft()
+        if self._udp_sock is None:
+            msg = self._conn.recv_msg()  # TCP / serial: one peer by construction
+            return None if msg is None else (msg, None, 0.0)
+        try:
+            data, ancdata, _flags, addr = self._udp_sock.recvmsg(65535, socket.CMSG_SPACE(16) if self._kernel_stamps else 0)
+        except (BlockingIOError, InterruptedError):
+            return None
+        except ConnectionRefusedError:  # ICMP port unreachable from an earlier send: nobody there yet
+            return _SKIPPED
+        if self.peer is not None and addr != self.peer:
+            # not even decoded: a flood from elsewhere costs one recvmsg each, and counts against
+            # the wake-up's budget like any datagram (else it could keep the reader busy forever)
+            self._n["foreign_peer"] += 1
+            return _SKIPPED
+        age = 0.0
+        for level, kind, raw in ancdata:
+            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= _TIMESPEC.size:
+                sec, nsec = _TIMESPEC.unpack_from(raw)
+                age = max(0.0, time.time() - (sec + nsec * 1e-9))  # time it waited in the socket
+        for m in self._conn.mav.parse_buffer(data) or []:
+            self._pending.append((m, addr, age))
+        return self._pending.popleft() if self._pending else _SKIPPED
+
     def _drain(self) -> None:
-        """Decode everything that is waiting; never blocks."""
-        while True:
+        """Decode up to MAX_MESSAGES_PER_WAKEUP waiting messages; never blocks."""
+        if self._resume is not None:  # draining now: a scheduled resume would be a second slice
+            self._resume.cancel()
+            self._resume = None
+        for _ in range(MAX_MESSAGES_PER_WAKEUP):
             try:
-                msg = self._conn.recv_msg()
+                item = self._next()
             except (ConnectionError, OSError) as exc:
                 self._handler_error(exc)
                 return
-            if msg is None:
+            if item is None:
                 return
-            if msg.get_type() == "BAD_DATA":
+            if item is _SKIPPED:
                 continue
-            if self.on_received is not None:
-                self.on_received(msg)
-            if self.target is not None and msg.get_srcSystem() != self.target.system:
-                continue  # other systems on a shared link are not ours to follow
-            if self._handler is not None:
-                self._handler(msg)
+            self._dispatch(*item)
+            if not self._reading:  # the handler stopped reading (e.g. wait_heartbeat finished)
+                return
+        # Budget spent with (maybe) more waiting: yield to the other tasks. A socket with data wakes
+        # the reader again by itself (level-triggered); messages already decoded (several per
+        # datagram) or buffered by pymavlink (TCP / serial) need an explicit resume.
+        self._n["reader_yields"] += 1
+        if self._pending or self._udp_sock is None:
+            self._resume = asyncio.get_running_loop().call_soon(self._drain)
+
+    def _dispatch(self, msg: Any, addr: Any, age_s: float) -> None:
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            reason = str(getattr(msg, "reason", ""))
+            self._n["bad_signature" if "signature" in reason.lower() else "bad_data"] += 1
+            return
+        target = self.target
+        if target is not None:
+            if msg.get_srcSystem() != target.system or msg.get_srcComponent() != target.component:
+                self._n["not_target"] += 1  # other systems / components are not ours to follow
+                return
+            if kind == "HEARTBEAT" and not (
+                is_vehicle_heartbeat(msg) and msg.autopilot == target.autopilot and msg.type == target.vehicle_type
+            ):
+                self._n["not_autopilot_heartbeat"] += 1  # a GCS-type HEARTBEAT with our autopilot's ids: a spoof
+                return
+            if kind in STATE_MESSAGES and self.max_state_age_s is not None and age_s > self.max_state_age_s:
+                self._n["stale_state"] += 1
+                return
+        if self.on_received is not None:
+            self.on_received(msg)
+        self._last_addr = addr
+        if self._handler is not None:
+            self._handler(msg)
+
+    def _from_configured_address(self, addr: Any) -> bool:
+        """``udpout`` names the autopilot's address: only it may identify as the autopilot. (``udpin``
+        cannot know it in advance: the first autopilot HEARTBEAT fixes it; sign the link to
+        authenticate it.)"""
+        if self.endpoint.kind != "udpout" or addr is None:
+            return True
+        dest = getattr(self._conn, "destination_addr", None)
+        if dest is None:
+            return True
+        try:
+            host = socket.gethostbyname(dest[0])
+        except OSError:
+            return True
+        return (addr[0], addr[1]) == (host, int(dest[1]))
+
+    def _lock_udpin(self) -> None:
+        """``udpin``: from now on send only to the locked peer (pymavlink answers every sender)."""
+        if self.peer is not None and self.endpoint.kind == "udpin":
+            self._conn.clients = {self.peer}
+            self._conn.clients_last_alive = {self.peer: time.time()}
 
     def _handler_error(self, exc: BaseException) -> None:
         self.stop_reading()
@@ -189,13 +361,19 @@ class Link:
         """
         loop = asyncio.get_running_loop()
         found: asyncio.Future[VehicleId] = loop.create_future()
+        found_addr: Any = None
 
         def handler(msg: Any) -> None:
+            nonlocal found_addr
             if found.done() or not is_vehicle_heartbeat(msg):
                 return
             if target_system is not None and msg.get_srcSystem() != target_system:
                 return
+            if not self._from_configured_address(self._last_addr):
+                self._n["foreign_peer"] += 1  # udpout: the autopilot is the address we were told
+                return
             self.first_heartbeat = msg
+            found_addr = self._last_addr
             found.set_result(VehicleId(msg.get_srcSystem(), msg.get_srcComponent(), msg.autopilot, msg.type))
 
         self.start_reading(handler)
@@ -215,8 +393,14 @@ class Link:
         finally:
             self.stop_reading()
         if not found.done():
-            raise LinkError(f"no HEARTBEAT from an autopilot on {self.endpoint} within {timeout_s:g} s")
+            refused = self._n["bad_signature"]
+            hint = f" ({refused} frames refused: unsigned or signed with another key)" if refused else ""
+            raise LinkError(f"no HEARTBEAT from an autopilot on {self.endpoint} within {timeout_s:g} s{hint}")
         self.target = found.result()
+        # UDP: lock to the address the autopilot spoke from (the first peer): the same ids from any
+        # other address are a second sender, refused from now on.
+        self.peer = found_addr
+        self._lock_udpin()
         return self.target
 
     # ------------------------------------------------------------------ sending

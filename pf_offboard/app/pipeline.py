@@ -93,7 +93,8 @@ class Pipeline:
         if self.estimator.reset_pending:
             self.estimator.reset_pending = False
             self.follower.reset()  # the position may have jumped: redo the global projection
-            events.append("estimator_reset")
+            reason = self.estimator.reset_reason
+            events.append(f"estimator_reset: {reason}" if reason else "estimator_reset")
         stamp = time_boot_ms(est)
         try:
             if self._timed:

@@ -5,6 +5,8 @@ Sections:
 - ``sim``: in-process simulation speed of the sitl_mock dynamics (× real time at 1 kHz physics).
 - ``mavlink``: lockstep simulation speed over loopback MAVLink with a client in the loop (× real
   time), and the app's state-in → setpoint-out latency (median, p99 ms at 250 Hz).
+- ``memory``: resident memory of ``sim`` and ``fly`` over an hour of simulated time (``--quick``:
+  10 minutes): RSS after 1 simulated minute, at the end, growth in percent.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ SECTIONS: tuple[tuple[str, str, str], ...] = (
     ("sim", "sitl_mock.dynamics.bench", "run_inprocess"),
     ("mavlink", "sitl_mock.bench_lockstep", "run_lockstep"),
     ("latency", "pf_offboard.bench.latency", "run"),
+    ("memory", "pf_offboard.bench.memory", "run"),
 )
 
 
@@ -29,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--only",
         choices=[name for name, _, _ in SECTIONS],
         action="append",
-        help="run only this section (repeatable); default: all",
+        help="run only this section (repeatable); default: all but memory (an hour of simulated flight)",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     parser.add_argument("--quick", action="store_true", help="fewer samples (smoke run)")
@@ -39,8 +42,12 @@ def _section(module_name: str, func_name: str) -> Callable[..., dict[str, Any]]:
     return getattr(importlib.import_module(module_name), func_name)
 
 
+# Long-running sections run only when asked for with --only (memory flies an hour of simulated time).
+ON_REQUEST = ("memory",)
+
+
 def run(args: argparse.Namespace) -> int:
-    chosen = args.only or [name for name, _, _ in SECTIONS]
+    chosen = args.only or [name for name, _, _ in SECTIONS if name not in ON_REQUEST]
     results: dict[str, dict[str, Any]] = {}
     for name, module_name, func_name in SECTIONS:
         if name not in chosen:

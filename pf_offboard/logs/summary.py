@@ -16,12 +16,10 @@ Definitions (all over *active* steps, i.e. while the follower's setpoints were s
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass
 
-import numpy as np
-
-from pf_offboard.logs.steplog import StepRecord, column
+from pf_offboard.logs.steplog import StepRecord
 
 SAT_FLAGS = ("sat_tangential", "sat_transversal", "sat_tilt", "sat_thrust", "sat_approach_speed")
 
@@ -62,52 +60,116 @@ class FlightSummary:
         return out
 
 
+# Events kept for the summary: a flight that logs an event on every step (e.g. a hold sent instead
+# of a non-finite command) must not grow the summary without bound. The count of the rest is kept.
+MAX_EVENTS = 200
+
+
+class SummaryAccumulator:
+    """The :class:`FlightSummary` of a stream of step records, in constant memory.
+
+    ``add(record)`` per step, ``result()`` at any time; the same definitions as :func:`summarize`
+    (which is this, over a sequence). Convergence is "the first active step after the last bad
+    one": the sums over the steps from convergence on restart at every bad active step, so only
+    running sums are kept, never the steps.
+    """
+
+    def __init__(self, cross_track_tol_m: float = 0.05, speed_tol_m_s: float = 0.1) -> None:
+        self.cross_track_tol_m = cross_track_tol_m
+        self.speed_tol_m_s = speed_tol_m_s
+        self.steps = 0
+        self.active_steps = 0
+        self._t_first = self._t_last = math.nan
+        self._prev: StepRecord | None = None  # its saturation lasts until this step
+        self._saturation = {k: 0.0 for k in SAT_FLAGS}
+        self._modes: list[tuple[float, str, str]] = []
+        self._mode = ""
+        self._events: list[tuple[float, str]] = []
+        self.events_dropped = 0
+        self._t_act: float | None = None
+        # the window from convergence on: start time, count, sum of squares, max
+        self._conv_t: float | None = None
+        self._n = 0
+        self._ct2 = 0.0
+        self._ct_max = -math.inf
+        self._err2 = 0.0
+
+    def add(self, r: StepRecord) -> None:
+        t = r.time_s
+        prev = self._prev
+        if prev is not None and prev.active:
+            dt = t - prev.time_s
+            for k in SAT_FLAGS:
+                if getattr(prev, k):
+                    self._saturation[k] += dt
+        if self.steps == 0:
+            self._t_first = t
+        self._t_last = t
+        self.steps += 1
+        self._prev = r
+        if r.mode != self._mode:
+            self._modes.append((t, self._mode, r.mode))
+            self._mode = r.mode
+        if r.event:
+            if len(self._events) < MAX_EVENTS:
+                self._events.append((t, r.event))
+            else:
+                self.events_dropped += 1
+        if not r.active:
+            return
+        self.active_steps += 1
+        if self._t_act is None:
+            self._t_act = t
+        ct = r.cross_track_m
+        err = r.eta2_m_s - r.speed_ref_m_s
+        good = ct <= self.cross_track_tol_m and abs(err) <= self.speed_tol_m_s  # False for NaN
+        if not good:
+            self._conv_t, self._n, self._ct2, self._ct_max, self._err2 = None, 0, 0.0, -math.inf, 0.0
+            return
+        if self._conv_t is None:
+            self._conv_t = t
+        self._n += 1
+        self._ct2 += ct * ct
+        self._ct_max = max(self._ct_max, ct)
+        self._err2 += err * err
+
+    def result(self) -> FlightSummary:
+        if self.steps == 0:
+            return FlightSummary(0.0, 0, 0, None, None, None, None, None, {k: 0.0 for k in SAT_FLAGS}, (), ())
+        events = tuple(self._events)
+        if self.events_dropped:
+            events += ((self._t_last, f"... {self.events_dropped} more events (see the step log)"),)
+        duration = float(self._t_last - self._t_first)
+        saturation = dict(self._saturation)
+        if self._t_act is None:
+            return FlightSummary(duration, self.steps, 0, None, None, None, None, None, saturation, tuple(self._modes), events)
+        if self._conv_t is None:
+            conv = rms = mx = srms = None
+        else:
+            conv = self._conv_t - self._t_act
+            rms = math.sqrt(self._ct2 / self._n)
+            mx = self._ct_max
+            srms = math.sqrt(self._err2 / self._n)
+        return FlightSummary(
+            duration_s=duration,
+            steps=self.steps,
+            active_steps=self.active_steps,
+            activation_time_s=self._t_act,
+            convergence_time_s=conv,
+            cross_track_rms_m=rms,
+            cross_track_max_m=mx,
+            speed_error_rms_m_s=srms,
+            saturation_s=saturation,
+            mode_changes=tuple(self._modes),
+            events=events,
+        )
+
+
 def summarize(
-    records: Sequence[StepRecord], cross_track_tol_m: float = 0.05, speed_tol_m_s: float = 0.1
+    records: Iterable[StepRecord], cross_track_tol_m: float = 0.05, speed_tol_m_s: float = 0.1
 ) -> FlightSummary:
     """Summarise a flight's step log (see the module docstring for the definitions)."""
-    n = len(records)
-    if n == 0:
-        return FlightSummary(0.0, 0, 0, None, None, None, None, None, {k: 0.0 for k in SAT_FLAGS}, (), ())
-    t = column(records, "time_s")
-    active = np.array([r.active for r in records], dtype=bool)
-    dt = np.diff(t, append=t[-1])  # each step lasts until the next one
-    saturation = {k: float(np.sum(dt[active & np.array([getattr(r, k) for r in records], dtype=bool)])) for k in SAT_FLAGS}
-    modes: list[tuple[float, str, str]] = []
-    prev = ""
+    acc = SummaryAccumulator(cross_track_tol_m, speed_tol_m_s)
     for r in records:
-        if r.mode != prev:
-            modes.append((r.time_s, prev, r.mode))
-            prev = r.mode
-    events = tuple((r.time_s, r.event) for r in records if r.event)
-    idx = np.flatnonzero(active)
-    if idx.size == 0:
-        return FlightSummary(float(t[-1] - t[0]), n, 0, None, None, None, None, None, saturation, tuple(modes), events)
-    ct = column(records, "cross_track_m")[idx]
-    err = (column(records, "eta2_m_s") - column(records, "speed_ref_m_s"))[idx]
-    good = (ct <= cross_track_tol_m) & (np.abs(err) <= speed_tol_m_s)
-    good &= np.isfinite(ct) & np.isfinite(err)
-    # first index from which all later active steps are good
-    bad = np.flatnonzero(~good)
-    first = 0 if bad.size == 0 else int(bad[-1]) + 1
-    t_act = float(t[idx[0]])
-    if first >= idx.size:
-        conv = rms = mx = srms = None
-    else:
-        conv = float(t[idx[first]]) - t_act
-        rms = float(math.sqrt(np.mean(ct[first:] ** 2)))
-        mx = float(np.max(ct[first:]))
-        srms = float(math.sqrt(np.mean(err[first:] ** 2)))
-    return FlightSummary(
-        duration_s=float(t[-1] - t[0]),
-        steps=n,
-        active_steps=int(idx.size),
-        activation_time_s=t_act,
-        convergence_time_s=conv,
-        cross_track_rms_m=rms,
-        cross_track_max_m=mx,
-        speed_error_rms_m_s=srms,
-        saturation_s=saturation,
-        mode_changes=tuple(modes),
-        events=events,
-    )
+        acc.add(r)
+    return acc.result()

@@ -80,8 +80,8 @@ def _validate(points: ArrayLike, closed: bool) -> NDArray[np.float64]:
         raise InputError("closed", f"must be true or false, got {closed!r}")
     try:
         pts = np.array(points, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise InputError("waypoints", f"not an (N, 3) array of numbers ({exc})") from None
+    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: an integer beyond float range
+        raise InputError("waypoints", f"not an (N, 3) array of numbers ({' '.join(str(exc).split())[:120]})") from None
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise InputError("waypoints", f"expected shape (N, 3) in metres, got {pts.shape}")
     for i, p in enumerate(pts):

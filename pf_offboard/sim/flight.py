@@ -21,10 +21,12 @@ throw trigger for a thrown start), follow until the duration or lap count is rea
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +37,7 @@ from pf_offboard import frames
 from pf_offboard.errors import InputError
 from pf_offboard.logs.flightlog import FlightLog, FlightLogPaths
 from pf_offboard.logs.steplog import StepRecord
-from pf_offboard.logs.summary import FlightSummary, summarize
+from pf_offboard.logs.summary import FlightSummary, SummaryAccumulator
 from pf_offboard.logs.tlog import OWN_COMPONENT_ID
 
 AUTOPILOT_SYSTEM_ID = 1
@@ -69,16 +71,28 @@ class SimSpec:
 
 @dataclass
 class SimResult:
-    """What a sim flight produced."""
+    """What a sim flight produced.
+
+    The steps are not kept in memory (an hour at 250 Hz is 900 000 of them): the summary was
+    computed as they streamed to the CSV, and :attr:`records` reads them back from it on demand
+    (bit-identical: floats are written in their shortest round-trip form).
+    """
 
     paths: FlightLogPaths
-    records: list[StepRecord]
     summary: FlightSummary
     reason: str  # why it ended
     activation_time_s: float | None
     crashed: bool
     sim_time_s: float
     autopilot_log: list[str] = field(default_factory=list)
+
+    @functools.cached_property
+    def records(self) -> list[StepRecord]:
+        """Every step of the flight, read from the step log the first time it is asked for (for
+        tests and analysis, not the CLI), then kept."""
+        from pf_offboard.logs.steplog import read_steplog
+
+        return read_steplog(self.paths.steps_csv)
 
 
 def _vec(text: str, n: int, flag: str) -> tuple[float, ...]:
@@ -236,7 +250,9 @@ class SimFlight:
         self._event = ""
         self._mode_requested = False
         self._inbox: deque[Any] = deque()
-        self.records: list[StepRecord] = []
+        self.summary = SummaryAccumulator()  # running sums only: the steps go to the CSV
+        # called with the simulated time every 250 steps (benchmarks sample memory with it)
+        self.progress: Callable[[float], None] | None = None
         self.reason = ""
 
     def _make_autopilot(self, config: Any) -> Any:
@@ -339,7 +355,7 @@ class SimFlight:
                 return
             if self.phase != "waiting" and self.activation_time_s is None:
                 self.activation_time_s = est.time_s  # the first setpoint meant to fly
-            self.records.append(step.record)
+            self.summary.add(step.record)
             log.step(step.record)
             self._send(log, step.setpoint)
             if self.phase == "following":
@@ -377,7 +393,9 @@ class SimFlight:
         max_steps = int(math.ceil(limit_s / self.dt_s)) + 1
         with FlightLog.open(self.out_dir, spec.name, config_path=self.config_path) as log:
             self._setup(log)
-            for _ in range(max_steps):
+            for i in range(max_steps):
+                if self.progress is not None and i % 250 == 0:
+                    self.progress(self.autopilot.time_s)
                 self._inbox.extend(msg for _, msg in self.autopilot.due_telemetry())
                 self._deliver(log)
                 self.reason = self._end_reason()
@@ -389,8 +407,7 @@ class SimFlight:
             paths = log.paths
         return SimResult(
             paths=paths,
-            records=self.records,
-            summary=summarize(self.records),
+            summary=self.summary.result(),
             reason=self.reason,
             activation_time_s=self.activation_time_s,
             crashed=bool(self.autopilot.truth.crashed),

@@ -76,7 +76,8 @@ def test_odometry_in_a_non_ned_frame_is_rejected() -> None:
 
 def test_duplicated_or_reordered_samples_are_not_fresh() -> None:
     """A UDP duplicate or an older sample does not step the controller; a clock restart
-    (autopilot reboot: time jumps back by more than the window) is accepted."""
+    (autopilot reboot: time jumps back by more than the window) is accepted once the next sample
+    confirms it."""
     est = Estimator("local_position")
     assert est.on_message(local_position(5000, (1.0, 0.0, -2.0)))
     assert not est.on_message(local_position(5000, (1.0, 0.0, -2.0)))  # duplicate
@@ -85,7 +86,103 @@ def test_duplicated_or_reordered_samples_are_not_fresh() -> None:
     assert est.on_message(local_position(5004, (1.1, 0.0, -2.0)))
     est2 = Estimator("local_position")
     assert est2.on_message(local_position(60_000))
-    assert est2.on_message(local_position(10))  # rebooted
+    assert not est2.on_message(local_position(10))  # rebooted? refused until confirmed
+    assert est2.on_message(local_position(14))  # confirmed: the new timeline is adopted
+    assert est2.reset_pending and "clock jumped" in est2.reset_reason and est2.clock_reanchors == 1
     odo = Estimator("odometry")
     assert odo.on_message(odometry(7_000_000, (0.0, 0.0, -1.0), (0.0, 0.0, 0.0)))
     assert not odo.on_message(odometry(7_000_000, (0.0, 0.0, -1.0), (0.0, 0.0, 0.0)))
+
+
+# ---------------------------------------------------------------------------- plausibility (issue 9)
+def _stream(est: Estimator, t0_ms: int, n: int, pos=(1.0, 2.0, -3.0), step_ms: int = 4) -> list[bool]:
+    return [est.on_message(local_position(t0_ms + i * step_ms, pos, (0.0, 0.0, 0.0))) for i in range(n)]
+
+
+def test_attitude_reordered_or_duplicated_is_not_used() -> None:
+    est = Estimator("local_position")
+    est.on_message(attitude_quaternion(1000, quat_about((0, 0, 1), 0.5)))
+    older = quat_about((0, 0, 1), -1.0)
+    est.on_message(attitude_quaternion(996, older))  # reordered: older than what we have
+    est.on_message(attitude_quaternion(1000, older))  # duplicate time
+    assert est.on_message(local_position(1001))
+    assert est.latest.q_enu_flu == pytest.approx(frames.quat_ned_frd_to_enu_flu(quat_about((0, 0, 1), 0.5)))
+    assert est.rejected_old == 2
+    est.on_message(attitude_quaternion(1004, older))  # newer: used
+    assert est.on_message(local_position(1005))
+    assert est.latest.q_enu_flu == pytest.approx(frames.quat_ned_frd_to_enu_flu(older))
+
+
+def test_one_future_dated_sample_does_not_block_the_genuine_stream() -> None:
+    est = Estimator("local_position")
+    est.on_message(attitude_quaternion(4999))
+    assert all(_stream(est, 5000, 10))
+    assert not est.on_message(local_position(10_000, (1.0, 2.0, -3.0)))  # 5 s in the future: refused
+    assert est.clock_jumps == 1 and "time jumped +4.964 s" in est.last_event
+    # the genuine stream continues: every sample is fresh (before: "not newer" for 5 s)
+    assert all(_stream(est, 5040, 50))
+    assert est.latest.time_s == pytest.approx(5.236) and not est.reset_pending
+    # a future-dated attitude is not used either
+    q_spoof = quat_about((1, 0, 0), 1.0)
+    est.on_message(attitude_quaternion(9_000, q_spoof))
+    assert est.on_message(local_position(5240))
+    assert est.latest.q_enu_flu == pytest.approx(frames.quat_ned_frd_to_enu_flu([1.0, 0.0, 0.0, 0.0]))
+
+
+def test_interleaved_spoofs_10_s_apart_are_not_a_reboot() -> None:
+    """A spoofer interleaving samples 10+ s older (a fake "reboot") with the genuine stream:
+    none is accepted, because each genuine sample drops the unconfirmed candidate."""
+    est = Estimator("local_position")
+    genuine_pos, spoof_pos = (1.0, 2.0, -3.0), (40.0, 2.0, -3.0)
+    accepted = []
+    for i in range(100):
+        accepted.append(est.on_message(local_position(20_000 + 4 * i, genuine_pos, (0, 0, 0))))
+        assert not est.on_message(local_position(9_000 + 4 * i, spoof_pos, (0, 0, 0)))
+        assert est.latest.position_enu_m == pytest.approx(frames.ned_to_enu(genuine_pos))
+    assert all(accepted) and est.clock_reanchors == 0 and not est.reset_pending and est.clock_jumps == 100
+
+
+def test_a_50_m_position_jump_is_refused_and_flagged_only_when_confirmed() -> None:
+    est = Estimator("local_position")
+    assert all(_stream(est, 1000, 5, (0.0, 0.0, -2.0)))
+    # a single 50 m jump: refused, counted, the controller never sees it
+    assert not est.on_message(local_position(1020, (50.0, 0.0, -2.0), (0, 0, 0)))
+    assert est.rejected_jumps == 1 and "position jumped 50.00 m" in est.last_event and not est.reset_pending
+    assert est.latest.position_enu_m == pytest.approx([0.0, 0.0, 2.0])
+    # the genuine track continues: the jump candidate is dropped
+    assert est.on_message(local_position(1024, (0.0, 0.0, -2.0), (0, 0, 0)))
+    # an estimator that really moved (two consistent samples): accepted as a flagged reset
+    assert not est.on_message(local_position(1028, (50.0, 0.0, -2.0), (0, 0, 0)))
+    assert est.on_message(local_position(1032, (50.0, 0.0, -2.0), (0, 0, 0)))
+    assert est.reset_pending and "position jumped 50.00 m" in est.reset_reason and est.position_resets == 1
+    assert est.rejected_jumps == 2
+
+
+def test_fast_but_plausible_motion_is_not_a_jump() -> None:
+    """A vehicle at 15 m/s sampled at 30 Hz moves 0.5 m per sample: accepted."""
+    est = Estimator("local_position")
+    for i in range(60):
+        t_ms = 1000 + round(i * 1000 / 30)
+        assert est.on_message(local_position(t_ms, (15.0 * i / 30, 0.0, -2.0), (15.0, 0.0, 0.0)))
+    assert est.rejected == 0
+
+
+def test_the_flight_clock_is_continuous_across_a_clock_jump() -> None:
+    est = Estimator("local_position")
+    _stream(est, 60_000, 251)  # 1 s
+    assert est.latest.clock_s == pytest.approx(1.0)
+    est.on_message(local_position(10, (1.0, 2.0, -3.0), (0, 0, 0)))  # reboot candidate
+    est.on_message(local_position(14, (1.0, 2.0, -3.0), (0, 0, 0)))  # confirmed
+    _stream(est, 18, 250)
+    # 1 s before the jump + 1 s after it; not 61 s, nor negative
+    assert est.latest.time_s == pytest.approx(1.014) and est.latest.clock_s == pytest.approx(2.0)
+
+
+def test_a_gap_in_the_stream_is_confirmed_without_a_reset() -> None:
+    """Samples resuming 2 s later (a blackout): the first is held back, the next confirms the new
+    time, and no estimator reset is flagged (the position did not jump)."""
+    est = Estimator("local_position")
+    assert all(_stream(est, 1000, 10))
+    assert not est.on_message(local_position(3036, (1.0, 2.0, -3.0), (0, 0, 0)))
+    assert est.on_message(local_position(3040, (1.0, 2.0, -3.0), (0, 0, 0)))
+    assert est.clock_reanchors == 1 and not est.reset_pending and "resumed 2.004 s later" in est.last_event

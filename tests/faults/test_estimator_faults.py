@@ -1,0 +1,44 @@
+"""Estimator plausibility against sitl-mock over real loopback UDP (issue 9, item 5, the parts on
+implausible jumps): a 50 m jump of the autopilot's position estimate mid-flight."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sitl_mock.config import FaultConfig
+from sitl_mock.runner import run_in_thread
+from sitl_mock.testing import free_udp_port
+
+from app.flights import write_config
+
+from .attackers import fly_udpin, mock_config
+
+pytestmark = pytest.mark.integration
+
+
+def test_a_50_m_estimator_jump_is_refused_then_flagged_as_an_estimator_reset(tmp_path) -> None:
+    """LOCAL_POSITION_NED jumps 50 m north at t = 5 s (the vehicle does not move). The first jumped
+    sample is refused (never flown); the next confirms it, and it is accepted as an estimator reset:
+    the follower restarts, the step log and the report say so, and the counters a flight-envelope
+    monitor reads (``Estimator.rejected_jumps`` / ``position_resets``) count it. Ending following on
+    such a reset is the envelope monitor's decision, not the estimator's."""
+    app_port = free_udp_port()
+    config = write_config(tmp_path)
+    faults = FaultConfig(estimator_reset_at_s=5.0, estimator_reset_ned_m=(50.0, 0.0, 0.0))
+    with run_in_thread(mock_config(app_port, faults=faults)) as mock:
+        outcome, printed = fly_udpin(app_port, config, tmp_path / "log", "--airborne", "--duration", "5.5")
+        mode = mock.call(lambda m: m.autopilot.mode.name)
+    est = outcome.estimator
+    assert est.rejected_jumps == 1 and est.position_resets == 1, est.last_event
+    records = outcome.records
+    resets = [r for r in records if "estimator_reset: position jumped" in r.event]
+    assert len(resets) == 1 and 5.0 <= resets[0].time_s <= 5.05, [r.event for r in records if r.event]
+    t_reset = resets[0].time_s
+    # before the confirming sample no step saw the jumped position; from it on every step does
+    before = np.array([r.position_enu_m for r in records if r.time_s < t_reset])
+    after = np.array([r.position_enu_m for r in records if r.time_s >= t_reset])
+    assert np.abs(before[:, 1]).max() < 5.0 and np.all(after[:, 1] > 45.0)  # ENU y = NED north
+    assert "1 position jumps (1 confirmed as resets)" in printed
+    # what happens next belongs to the flight-envelope monitor; without one the flight ends as asked
+    assert outcome.exit_code == 0 or "estimator" in outcome.reason or "envelope" in outcome.reason, printed
+    assert mode in ("AUTO.LOITER", "AUTO.LAND")
