@@ -80,7 +80,7 @@ def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
         state_timeout_s=float(get("state_timeout_s", 0.5)),
         hover_thrust=get("hover_thrust", None),
         end_action=args.end_action or get("end_action", "hold"),
-        attitude_time_constant_s=float(get("attitude_time_constant_s", 0.05)),
+        attitude_time_constant_s=_attitude_time_constant(config, get("attitude_time_constant_s", None)),
     )
     if s.output_mode not in ("acceleration", "attitude", "rates"):
         raise InputError("flight.output_mode", f"must be acceleration, attitude or rates, got {s.output_mode!r}")
@@ -95,6 +95,17 @@ def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
     if not (math.isfinite(s.attitude_time_constant_s) and 0.01 <= s.attitude_time_constant_s <= 2.0):
         raise InputError("flight.attitude_time_constant_s", f"must be in [0.01, 2] s, got {s.attitude_time_constant_s}")
     return s
+
+
+def _attitude_time_constant(config: Any, configured: Any) -> float:
+    """Rates mode's τ (s): ``flight.attitude_time_constant_s`` if set, else derived from the
+    identified rate loop (``vehicle.rate_time_constant_s``: 4x it), else the default 0.25 s."""
+    from pf_offboard.control.attitude import AttitudeRateLaw
+
+    if configured is not None:
+        return float(configured)
+    rate_tc = getattr(getattr(config, "vehicle", None), "rate_time_constant_s", 0.0) or 0.0
+    return AttitudeRateLaw.for_rate_loop(float(rate_tc)).time_constant_s
 
 
 def _heights_from_config(args: argparse.Namespace, config: Any) -> None:
