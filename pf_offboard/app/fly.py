@@ -50,6 +50,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="position/velocity telemetry to follow with")  # fmt: skip
     parser.add_argument("--set-guid-options", action="store_true",
                         help="ArduPilot: set the GUID_OPTIONS bits the output mode needs instead of refusing")  # fmt: skip
+    parser.add_argument("--experimental-output", action="store_true",
+                        help="fly an output mode the app refuses on this autopilot (ArduPilot acceleration: "
+                             "measured to oscillate by metres); experimental")  # fmt: skip
+    parser.add_argument("--ready-timeout", type=float, default=120.0, metavar="S",
+                        help="--takeoff/--airborne: wait up to S seconds for the position estimate and arming checks (default 120)")  # fmt: skip
+    parser.add_argument("--takeoff-timeout", type=float, metavar="S",
+                        help="--takeoff: give up if the take-off altitude is not held within S seconds (default 30 + 5 s per metre)")  # fmt: skip
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/<UTC timestamp>/")
     parser.add_argument("--quiet", action="store_true", help="no status line")
 
@@ -131,6 +138,9 @@ def _check_args(args: argparse.Namespace) -> None:
         raise InputError("--duration", f"must be > 0 s, got {args.duration}")
     if not (math.isfinite(args.heartbeat_timeout) and args.heartbeat_timeout > 0):
         raise InputError("--heartbeat-timeout", f"must be > 0 s, got {args.heartbeat_timeout}")
+    for flag, value in (("--ready-timeout", getattr(args, "ready_timeout", 120.0)), ("--takeoff-timeout", getattr(args, "takeoff_timeout", None))):
+        if value is not None and not (math.isfinite(value) and 0 < value <= 3600):
+            raise InputError(flag, f"must be in (0, 3600] s, got {value}")
     if args.target_system is not None and not 1 <= args.target_system <= 255:
         raise InputError("--target-system", f"must be a MAVLink system id in 1..255, got {args.target_system}")
 
@@ -187,7 +197,7 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     from pf_offboard.app.estimator import Estimator
     from pf_offboard.app.link import Link
     from pf_offboard.app.pipeline import Pipeline
-    from pf_offboard.app.profiles import Autopilot, select_profile
+    from pf_offboard.app.profiles import Autopilot, output_mode_refusal, select_profile
     from pf_offboard.control import PathFollower
     from pf_offboard.logs.flightlog import FlightLog
     from pf_offboard.logs.steplog import read_steplog
@@ -199,6 +209,12 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     try:
         target = await link.wait_heartbeat(args.heartbeat_timeout, args.target_system)
         profile = select_profile(args.autopilot, target.autopilot)
+        refusal = output_mode_refusal(profile, settings.output_mode)
+        if refusal:
+            if not getattr(args, "experimental_output", False):
+                # before the log, the reader and any command or setpoint
+                raise InputError("--output", f"{settings.output_mode} refused on {profile.name}: {refusal}")
+            print(f"pf-offboard fly: warning: {settings.output_mode} on {profile.name} is experimental: {refusal}", file=stream)
         link.set_source_system(target.system)
         log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
         try:
@@ -220,6 +236,8 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             setpoint_rate_hz=settings.setpoint_rate_hz,
             state_timeout_s=settings.state_timeout_s,
             status=not args.quiet,
+            ready_timeout_s=getattr(args, "ready_timeout", 120.0),
+            takeoff_timeout_s=getattr(args, "takeoff_timeout", None),
         )
         encoder = Encoder(
             settings.output_mode, profile, target.system, target.component,
@@ -238,8 +256,12 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
             # telemetry at the rates we need: state at the setpoint rate (a fresh sample drives
             # each setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s where honoured.
             state_id = mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED if args.state_source == "local_position" else mavlink2.MAVLINK_MSG_ID_ODOMETRY
-            for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
-                bridge.request_interval(msg_id, rate)
+            state_name = "LOCAL_POSITION_NED" if args.state_source == "local_position" else "ODOMETRY"
+            await bridge.request_intervals([
+                (state_id, settings.setpoint_rate_hz, state_name),
+                (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz, "ATTITUDE_QUATERNION"),
+                (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0, "HEARTBEAT"),
+            ])  # fmt: skip
             if settings.hover_thrust is None and settings.output_mode != "acceleration":
                 hover = await bridge.read_param(profile.hover_thrust_param)
                 if not 0.05 <= hover <= 0.95:
