@@ -8,6 +8,9 @@ Definitions (all over *active* steps, i.e. while the follower's setpoints were s
   (None when the flight never settles);
 - cross-track RMS / max: over active steps from convergence on;
 - speed error RMS: of ``eta2 - eta2_ref`` over the same steps;
+- whole flight: cross-track RMS / max and speed error RMS / mean over *every* active step from
+  activation on (always given when there are active steps, also when the convergence rule
+  never holds, e.g. on a real vehicle whose GPS noise keeps it beyond 5 cm);
 - saturation time: per limit, the summed duration of active steps whose flag is set (each
   step counts for the interval to the next step);
 - mode changes: (time, from, to) whenever the ``mode`` column changes, and logged events.
@@ -39,6 +42,11 @@ class FlightSummary:
     saturation_s: dict[str, float]
     mode_changes: tuple[tuple[float, str, str], ...]
     events: tuple[tuple[float, str], ...]
+    # over every active step (from activation on); None without active steps
+    whole_cross_track_rms_m: float | None = None
+    whole_cross_track_max_m: float | None = None
+    whole_speed_error_rms_m_s: float | None = None
+    whole_speed_error_mean_m_s: float | None = None
 
     def lines(self) -> list[str]:
         """Human-readable summary, one fact per line."""
@@ -53,6 +61,9 @@ class FlightSummary:
             f"cross-track RMS     {f(self.cross_track_rms_m, 'm', '.4f')} (after convergence)",
             f"cross-track max     {f(self.cross_track_max_m, 'm', '.4f')} (after convergence)",
             f"speed error RMS     {f(self.speed_error_rms_m_s, 'm/s', '.4f')} (after convergence)",
+            f"whole flight        cross-track RMS {f(self.whole_cross_track_rms_m, 'm', '.4f')}, max {f(self.whole_cross_track_max_m, 'm', '.4f')}; "
+            f"speed error RMS {f(self.whole_speed_error_rms_m_s, 'm/s', '.4f')}, mean {f(self.whole_speed_error_mean_m_s, 'm/s', '+.4f')} "
+            "(all active steps)",
             "saturation          " + ", ".join(f"{k.removeprefix('sat_')} {v:.2f} s" for k, v in self.saturation_s.items()),
         ]
         for t, a, b in self.mode_changes:
@@ -91,6 +102,11 @@ def summarize(
     bad = np.flatnonzero(~good)
     first = 0 if bad.size == 0 else int(bad[-1]) + 1
     t_act = float(t[idx[0]])
+    ok_ct, ok_err = ct[np.isfinite(ct)], err[np.isfinite(err)]
+    w_rms = float(math.sqrt(np.mean(ok_ct**2))) if ok_ct.size else None
+    w_max = float(np.max(ok_ct)) if ok_ct.size else None
+    w_srms = float(math.sqrt(np.mean(ok_err**2))) if ok_err.size else None
+    w_smean = float(np.mean(ok_err)) if ok_err.size else None
     if first >= idx.size:
         conv = rms = mx = srms = None
     else:
@@ -110,4 +126,8 @@ def summarize(
         saturation_s=saturation,
         mode_changes=tuple(modes),
         events=events,
+        whole_cross_track_rms_m=w_rms,
+        whole_cross_track_max_m=w_max,
+        whole_speed_error_rms_m_s=w_srms,
+        whole_speed_error_mean_m_s=w_smean,
     )
