@@ -236,7 +236,7 @@ class BridgeOptions:
     # the arming checks (wall clock; ArduPilot needs ~42 s after boot)
     ready_timeout_s: float = 120.0
     takeoff_timeout_s: float | None = None  # None: 30 s + 5 s per metre of take-off height
-    progress_every_s: float = 10.0  # while waiting for readiness: one progress line this often
+    progress_every_s: float = 5.0  # while waiting for readiness: one progress line this often (wall clock)
 
 
 @dataclass
