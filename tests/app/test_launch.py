@@ -142,3 +142,28 @@ def test_heartbeat_interval_refusal_is_one_note_line(tmp_path) -> None:
     assert not [line for line in status.getvalue().splitlines() if line.startswith(("error", "pf-offboard fly: link error", "warning"))]
     # the state streams were still requested and honoured: the flight was driven by them
     assert np.isfinite(outcome.summary.whole_cross_track_rms_m)
+
+
+@pytest.mark.integration
+def test_px4_takeoff_retries_arming_until_the_checks_pass(tmp_path) -> None:
+    """PX4 refuses arming (TEMPORARILY_REJECTED, "no position estimate") until its estimator is
+    ready: --takeoff keeps retrying with progress lines instead of giving up after 5 s, then
+    arms, climbs and follows. The mock at 4x real time, estimate ready at 60 s of vehicle time."""
+    cfg = MockConfig(profile="px4", spawn=SpawnSpec.parse("ground"), udp_local_port=0, udp_remote=None,
+                     speed=4.0, ekf_ready_delay_s=60.0)  # fmt: skip
+    config = write_config(tmp_path, setpoint_rate_hz=50.0)
+    status = io.StringIO()
+    with run_in_thread(cfg) as mock:
+        args = fly_args("--connect", f"udpout:127.0.0.1:{mock.ports.udp}", "--config", str(config), "--log-dir",
+                        str(tmp_path / "log"), "--heartbeat-timeout", "5", "--takeoff", "2", "--duration", "1")  # fmt: skip
+        outcome = fly(args, status_stream=status)
+    text = status.getvalue()
+    assert outcome.exit_code == 0, text[-2000:]
+    assert "waiting for arming" in text
+    entries = read_tlog(tmp_path / "log" / "flight.tlog")
+    arm_acks = [e for e in entries if e.direction == "in" and e.message.get_type() == "COMMAND_ACK"
+                and e.message.command == mavlink2.MAV_CMD_COMPONENT_ARM_DISARM]  # fmt: skip
+    refused = [e for e in arm_acks if e.message.result == mavlink2.MAV_RESULT_TEMPORARILY_REJECTED]
+    accepted = [e for e in arm_acks if e.message.result == mavlink2.MAV_RESULT_ACCEPTED]
+    assert refused and accepted and refused[0].time_unix_s < accepted[0].time_unix_s
+    assert accepted[0].time_unix_s - refused[0].time_unix_s > 5.0  # beyond the old 5 s limit
