@@ -293,7 +293,7 @@ def test_ardupilot_acceleration_is_refused_with_the_mode_to_use(tmp_path, capsys
     err = capsys.readouterr().err
     assert code == 2, err
     lines = [line for line in err.splitlines() if line.strip()]
-    assert len(lines) == 1 and "--output" in lines[0] and "use --output attitude" in lines[0], err
+    assert len(lines) == 1 and "--output" in lines[0] and "use --output attitude" in lines[0].lower(), err
     assert "PSC_JERK" in lines[0] and "--experimental-output" in lines[0]
     assert "Traceback" not in err
 
