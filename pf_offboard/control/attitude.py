@@ -150,6 +150,12 @@ class AttitudeRateLaw:
         tau = DEFAULT_ATTITUDE_TIME_CONSTANT_S if tau_r == 0.0 else max(MIN_ATTITUDE_TIME_CONSTANT_S, RATE_LOOP_SEPARATION * tau_r)
         return cls(time_constant_s=min(tau, 2.0), **kwargs)
 
+    @classmethod
+    def from_vehicle(cls, vehicle: Any, **kwargs: Any) -> AttitudeRateLaw:
+        """:meth:`for_rate_loop` with ``vehicle.rate_time_constant_s`` (a
+        :class:`pf_offboard.control.VehicleModel`; 0 = unknown → the default τ)."""
+        return cls.for_rate_loop(getattr(vehicle, "rate_time_constant_s", 0.0), **kwargs)
+
     def evaluate(self, q_des_enu_flu: ArrayLike, q_meas_enu_flu: ArrayLike, rates_ff_flu_rad_s: ArrayLike) -> AttitudeRates:
         """The full output (command, unsaturated feedback, errors, saturation) for one sample.
 

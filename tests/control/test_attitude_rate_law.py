@@ -131,6 +131,8 @@ def test_time_constant_from_the_rate_loop() -> None:
     model = VehicleModel(rate_time_constant_s=0.08)
     law = AttitudeRateLaw.for_rate_loop(model.rate_time_constant_s, max_yaw_rate_rad_s=1.0)
     assert (law.time_constant_s, law.max_yaw_rate_rad_s) == (pytest.approx(0.32), 1.0)
+    assert AttitudeRateLaw.from_vehicle(model).time_constant_s == pytest.approx(0.32)
+    assert AttitudeRateLaw.from_vehicle(VehicleModel()).time_constant_s == DEFAULT_ATTITUDE_TIME_CONSTANT_S
 
 
 @pytest.mark.parametrize(
