@@ -51,7 +51,9 @@ class FlightConfig:
     takeoff_altitude_m: float = 2.0
     throw_activation_height_m: float | None = None  # None: no throw activation
     end_action: str = "hold"  # at the end of an open path: hold | land
-    attitude_time_constant_s: float = 0.05  # rates mode: attitude error feedback time constant
+    # rates mode: attitude error feedback time constant (s); None: derived from
+    # vehicle.rate_time_constant_s (4x it), or 0.25 s when that is unknown (see control/attitude.py)
+    attitude_time_constant_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -299,8 +301,9 @@ def _flight(data: Any) -> FlightConfig:
         ),
         end_action=_choice(d, "end_action", "flight.end_action", f.end_action, END_ACTIONS),
         attitude_time_constant_s=_number(
-            d, "attitude_time_constant_s", "flight.attitude_time_constant_s", f.attitude_time_constant_s, 0.01, 2.0
-        ),  # type: ignore[arg-type]
+            d, "attitude_time_constant_s", "flight.attitude_time_constant_s", f.attitude_time_constant_s, 0.01, 2.0,
+            nullable=True,
+        ),
     )
 
 

@@ -45,6 +45,8 @@ EXIT_CRASH = 6  # the vehicle disarmed, landed or fell while we commanded it
 EXIT_INTERRUPTED = 130  # Ctrl-C before following began
 
 
+_MAV_RESULT_NAMES = {0: "ACCEPTED", 1: "TEMPORARILY_REJECTED", 2: "DENIED", 3: "UNSUPPORTED", 4: "FAILED", 5: "IN_PROGRESS"}
+
 KEEPALIVE_S = 0.1  # re-send the last setpoint when nothing went out for this long
 SAFE_MODE_RETRY_S = 0.25  # re-send the safe-mode request this often until the HEARTBEAT shows it
 MAV_STATE_CRITICAL = 5  # HEARTBEAT.system_status: the autopilot is in its own failsafe
@@ -112,32 +114,78 @@ class ThrowTrigger:
 
 
 class LapCounter:
-    """Laps travelled along the path from arclength samples (η1), either direction.
+    """Laps completed: *net* progress along the path (η1 samples, metres) over its length.
 
-    Closed paths: η1 wraps at the path length, so each difference is taken modulo the length
-    (the shorter way round). Open paths: plain differences.
+    Each difference of η1 is taken modulo the length on closed paths (the shorter way round, so
+    the wrap at the start point is unwrapped) and summed with its sign, so jitter back and forth
+    cancels instead of accumulating. ``direction`` is the sign of travel (the sign of η2_ref):
+    progress against it counts negative. ``None``: either direction, the magnitude of the net
+    progress. Laps are never negative.
     """
 
-    def __init__(self, length_m: float, closed: bool) -> None:
+    def __init__(self, length_m: float, closed: bool, direction: float | None = None) -> None:
         self.length_m = length_m
         self.closed = closed
+        self.direction = None if direction is None else (1.0 if direction >= 0.0 else -1.0)
         self._last: float | None = None
-        self.travelled_m = 0.0
+        self.progress_m = 0.0  # signed net progress since the first sample (η1 units)
 
     def update(self, eta1_m: float) -> float:
         if not math.isfinite(eta1_m):
             return self.laps
         if self._last is not None:
             d = eta1_m - self._last
-            if self.closed:
+            if self.closed and self.length_m > 0:
                 d = (d + 0.5 * self.length_m) % self.length_m - 0.5 * self.length_m
-            self.travelled_m += abs(d)
+            self.progress_m += d
         self._last = eta1_m
         return self.laps
 
     @property
+    def travelled_m(self) -> float:
+        """Net path length travelled in the direction of travel (m, >= 0)."""
+        net = abs(self.progress_m) if self.direction is None else self.direction * self.progress_m
+        return max(0.0, net)
+
+    @property
     def laps(self) -> float:
         return self.travelled_m / self.length_m if self.length_m > 0 else 0.0
+
+
+class TakeoffSettle:
+    """When a take-off counts as done: the vehicle holds the take-off altitude, on average.
+
+    A vehicle hovering on GPS never sits still (PX4 SIH holds at 0.13-0.43 m/s), so a
+    per-sample rule "within 0.1 m and below 0.1 m/s" may never hold. Instead: over the last
+    ``window_s`` of vehicle time (at least that much history), the mean altitude error is within
+    ``altitude_tol_m`` and the mean speed below ``speed_tol_m_s``. Pure; feed state samples.
+    """
+
+    def __init__(self, height_m: float, altitude_tol_m: float = 0.3, speed_tol_m_s: float = 0.5, window_s: float = 1.0) -> None:
+        self.height_m = height_m
+        self.altitude_tol_m = altitude_tol_m
+        self.speed_tol_m_s = speed_tol_m_s
+        self.window_s = window_s
+        self._samples: list[tuple[float, float, float]] = []  # (time s, |altitude error| m, speed m/s)
+
+    def update(self, time_s: float, altitude_m: float, speed_m_s: float) -> bool:
+        """Feed one sample (vehicle time s, altitude m above home, speed m/s); True once settled."""
+        if not (math.isfinite(time_s) and math.isfinite(altitude_m) and math.isfinite(speed_m_s)):
+            return False
+        if self._samples and time_s <= self._samples[-1][0]:
+            return self.settled  # duplicated / reordered sample
+        self._samples.append((time_s, abs(altitude_m - self.height_m), speed_m_s))
+        while len(self._samples) > 1 and time_s - self._samples[1][0] >= self.window_s:
+            self._samples.pop(0)
+        return self.settled
+
+    @property
+    def settled(self) -> bool:
+        s = self._samples
+        if len(s) < 2 or s[-1][0] - s[0][0] < self.window_s:
+            return False
+        n = len(s)
+        return sum(e for _, e, _ in s) / n <= self.altitude_tol_m and sum(v for _, _, v in s) / n <= self.speed_tol_m_s
 
 
 @dataclass(frozen=True)
@@ -198,6 +246,11 @@ class BridgeOptions:
     state_timeout_s: float = 0.5
     command_timeout_s: float = 5.0  # per mode / arm / param request (wall clock)
     status: bool = True
+    # --takeoff / --airborne: how long to wait for the position estimate, an attitude sample and
+    # the arming checks (wall clock; ArduPilot needs ~42 s after boot)
+    ready_timeout_s: float = 120.0
+    takeoff_timeout_s: float | None = None  # None: 30 s + 5 s per metre of take-off height
+    progress_every_s: float = 5.0  # while waiting for readiness: one progress line this often (wall clock)
 
 
 @dataclass
@@ -238,7 +291,8 @@ class Bridge:
         self.status_stream = status_stream if status_stream is not None else sys.stderr
         self.clock = clock
         self.phase = Phase.PREFLIGHT
-        self.laps = LapCounter(path_length_m, path_closed)
+        speed_ref = pipeline.speed_ref_m_s
+        self.laps = LapCounter(path_length_m, path_closed, speed_ref if math.isfinite(speed_ref) and speed_ref != 0.0 else None)
         self.throw = ThrowTrigger(options.height_m) if options.launch == "throw" else None
         self.custom_mode: int | None = None
         self.base_mode = 0
@@ -255,6 +309,7 @@ class Bridge:
         self._last_fresh_wall = -math.inf
         self._takeoff_target: np.ndarray | None = None
         self._takeoff_yaw = 0.0
+        self._settle: TakeoffSettle | None = None
         self._changed = asyncio.Event()
         self._stop = asyncio.Event()
         self._end_reason = ""
@@ -396,6 +451,9 @@ class Bridge:
             # keep the stream (and a lockstep clock) going with the hold until the mode changes
             self._send(self.pipeline.encoder.hold(est, time_boot_ms(est)).message)
             return
+        if phase is Phase.TAKEOFF and self._settle is not None:
+            if self._settle.update(est.time_s, float(est.position_enu_m[2]), float(np.linalg.norm(est.velocity_enu_m_s))):
+                self._changed.set()
         if phase is Phase.TAKEOFF and self._takeoff_target is not None:
             self.pipeline.mark_consumed()
             if self.monitor is not None and self._takeoff_target[2] > est.position_enu_m[2] + 0.05:
@@ -661,11 +719,18 @@ class Bridge:
                 pass
         return True
 
-    async def _command_confirmed(self, what: str, send: Callable[[], None], confirmed: Callable[[], bool], command: int) -> None:
+    async def _command_confirmed(
+        self, what: str, send: Callable[[], None], confirmed: Callable[[], bool], command: int, timeout_s: float | None = None
+    ) -> None:
         """Send, re-send every 0.5 s until ``confirmed()``. COMMAND_ACK DENIED / UNSUPPORTED is a
         refusal at once; TEMPORARILY_REJECTED / FAILED (e.g. "no position estimate yet") are
-        retried until ``command_timeout_s``. Raises LinkError naming the last ACK and autopilot text."""
-        deadline = self.clock() + self.options.command_timeout_s
+        retried until ``timeout_s`` (default ``command_timeout_s``), with a progress line every
+        ``progress_every_s`` while the autopilot keeps refusing. Raises LinkError naming the last
+        ACK and autopilot text."""
+        timeout = self.options.command_timeout_s if timeout_s is None else max(timeout_s, self.options.command_timeout_s)
+        start = self.clock()
+        deadline = start + timeout
+        next_progress = start + self.options.progress_every_s
         final = (mavlink2.MAV_RESULT_DENIED, mavlink2.MAV_RESULT_UNSUPPORTED)
         while True:
             if self.phase in _INTERRUPTING:  # taken over / safing: never send another request
@@ -680,24 +745,48 @@ class Bridge:
                 raise LinkError(f"{what} refused by the autopilot{detail}")
             if self._stop.is_set() or self.phase in _INTERRUPTING:
                 raise LinkError(f"{what}: interrupted")
-            if self.clock() > deadline:
-                raise LinkError(f"{what}: not confirmed within {self.options.command_timeout_s:g} s{detail}")
+            now = self.clock()
+            if now > deadline:
+                raise LinkError(f"{what}: not confirmed within {timeout:g} s{detail}")
+            if now >= next_progress:
+                next_progress = now + self.options.progress_every_s
+                said = f": autopilot says {self.last_statustext!r}" if self.last_statustext else ""
+                self._print(f"waiting for {what}{said} ({now - start:.0f} s of up to {timeout:g} s)")
 
-    async def set_mode(self, mode: ModeRequest, custom_mode: int) -> None:
+    async def set_mode(self, mode: ModeRequest, custom_mode: int, timeout_s: float | None = None) -> None:
         await self._command_confirmed(
             f"mode {mode.name}",
             lambda: self._set_mode_nowait(mode),
             lambda: self.custom_mode == custom_mode or (mode is self.profile.offboard and self.custom_mode is not None and self.profile.is_offboard(self.custom_mode)),
             mavlink2.MAV_CMD_DO_SET_MODE,
+            timeout_s,
         )
 
-    async def arm(self) -> None:
+    async def arm(self, timeout_s: float | None = None) -> None:
+        """Arm; the autopilot's refusals while its checks are not ready yet are retried until
+        ``timeout_s`` (default ``command_timeout_s``)."""
         await self._command_confirmed(
             "arming",
             lambda: self._command(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1.0),
             lambda: is_armed(self.base_mode),
             mavlink2.MAV_CMD_COMPONENT_ARM_DISARM,
+            timeout_s,
         )
+
+    async def request_intervals(self, requests: list[tuple[int, float, str]], ack_timeout_s: float = 1.0) -> None:
+        """SET_MESSAGE_INTERVAL for each (message id, rate Hz, name), one at a time so each
+        COMMAND_ACK is matched to its request. A refusal is not fatal (the stream may flow at its
+        default rate): it is reported as one note line (PX4 refuses HEARTBEAT: it stays at 1 Hz)."""
+        for message_id, rate_hz, name in requests:
+            self.request_interval(message_id, rate_hz)
+            command = mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL
+            await self._wait_until(lambda: command in self.acks, ack_timeout_s)
+            result = self.acks.get(command)
+            if result is not None and result != mavlink2.MAV_RESULT_ACCEPTED:
+                label = _MAV_RESULT_NAMES.get(result, str(result))
+                consequence = " (a takeover is seen within one HEARTBEAT period of its default rate)" if name == "HEARTBEAT" else ""
+                self._note(f"note: the autopilot refused {name} at {rate_hz:g} Hz (SET_MESSAGE_INTERVAL: COMMAND_ACK {label}); "
+                            f"it stays at its default rate{consequence}")  # fmt: skip
 
     def request_interval(self, message_id: int, rate_hz: float) -> None:
         """SET_MESSAGE_INTERVAL; a refusal is reported, not fatal (the stream may already flow)."""
@@ -790,9 +879,11 @@ class Bridge:
 
     async def _launch(self) -> None:
         opts = self.options
-        est = await self._first_state()
+        ready_deadline = self.clock() + opts.ready_timeout_s
+        # the take-off heading comes from the attitude: wait for an attitude sample too
+        est = await self._first_state(ready_deadline, need_attitude=opts.launch == "takeoff")
         if opts.launch == "takeoff":
-            await self._takeoff(est)
+            await self._takeoff(est, ready_deadline)
             self._stream_follow_before_active = True
             self._activate()
             return
@@ -833,10 +924,33 @@ class Bridge:
                 mavlink2.MAV_CMD_DO_SET_MODE,
             )
 
-    async def _first_state(self) -> StateEstimate:
-        ok = await self._wait_until(lambda: self.pipeline.estimator.latest is not None, max(3.0, self.options.command_timeout_s))
-        if not ok:
-            raise LinkError("no LOCAL_POSITION_NED / ODOMETRY from the vehicle (is its position estimate ready?)")
+    async def _first_state(self, deadline: float | None = None, need_attitude: bool = False) -> StateEstimate:
+        """The first state sample (with an attitude if ``need_attitude``), waiting until
+        ``deadline`` (wall clock; default ``max(3, command_timeout_s)`` from now) with a progress
+        line every ``progress_every_s``: an autopilot sends LOCAL_POSITION_NED only once its
+        position estimate is ready (ArduPilot: ~42 s after boot)."""
+        if deadline is None:
+            deadline = self.clock() + max(3.0, self.options.command_timeout_s)
+        start = self.clock()
+
+        def ready() -> bool:
+            est = self.pipeline.estimator.latest
+            return est is not None and (est.q_enu_flu is not None or not need_attitude)
+
+        while not ready():
+            step_end = min(deadline, self.clock() + self.options.progress_every_s)
+            if await self._wait_until(ready, max(0.0, step_end - self.clock())):
+                break
+            if self._stop.is_set():
+                raise LinkError("interrupted while waiting for the position estimate")
+            now = self.clock()
+            if now >= deadline:
+                what = "no LOCAL_POSITION_NED / ODOMETRY" if self.pipeline.estimator.latest is None else "no ATTITUDE_QUATERNION"
+                said = f"; autopilot: {self.last_statustext}" if self.last_statustext else ""
+                raise LinkError(f"{what} from the vehicle within {now - start:.0f} s (is its position estimate ready? "
+                                f"--ready-timeout S waits longer){said}")  # fmt: skip
+            got = "position, waiting for attitude" if self.pipeline.estimator.latest is not None else "no position yet"
+            self._print(f"waiting for the vehicle's position estimate: {got} ({now - start:.0f} s of up to {deadline - start:.0f} s)")
         est = self.pipeline.estimator.latest
         assert est is not None
         return est
@@ -849,40 +963,48 @@ class Bridge:
         if not ok:
             raise LinkError("setpoint stream did not start (no fresh state samples)")
 
-    async def _takeoff(self, est: StateEstimate) -> None:
+    async def _takeoff(self, est: StateEstimate, ready_deadline: float | None = None) -> None:
         opts = self.options
+        # the heading of a sample that carries an attitude (see _first_state): never a default yaw
         self._takeoff_yaw = yaw_of(est.q_enu_flu) if est.q_enu_flu is not None else 0.0
+        ready_left = None if ready_deadline is None else max(0.0, ready_deadline - self.clock())
         target = np.array([est.position_enu_m[0], est.position_enu_m[1], opts.height_m])
         if self.profile.autopilot is Autopilot.PX4:
             # fly the take-off ourselves in OFFBOARD: position setpoints are the proof of life
             self._takeoff_target = np.array([est.position_enu_m[0], est.position_enu_m[1], est.position_enu_m[2]])
             self.phase = Phase.TAKEOFF
             await self._proof_of_life()
-            await self.set_mode(self.profile.offboard, self.profile.offboard_custom_mode)
+            await self.set_mode(self.profile.offboard, self.profile.offboard_custom_mode, ready_left)
             if not is_armed(self.base_mode):
-                await self.arm()
+                await self.arm(None if ready_deadline is None else max(0.0, ready_deadline - self.clock()))
             self._takeoff_target = target
         else:
             # ArduPilot: GUIDED, arm, MAV_CMD_NAV_TAKEOFF (it ignores position targets on the
             # ground). Send nothing meanwhile: in GUIDED any setpoint would cancel the take-off.
             self.phase = Phase.TAKEOFF
             self._last_setpoint = None
-            await self.set_mode(self.profile.offboard, self.profile.offboard_custom_mode)
+            await self.set_mode(self.profile.offboard, self.profile.offboard_custom_mode, ready_left)
             if not is_armed(self.base_mode):
-                await self.arm()
+                await self.arm(None if ready_deadline is None else max(0.0, ready_deadline - self.clock()))
             self._command(mavlink2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, opts.height_m)
         self._print(f"taking off to {opts.height_m:g} m")
 
-        def settled() -> bool:
-            e = self.pipeline.estimator.latest
-            return e is not None and abs(e.position_enu_m[2] - opts.height_m) < 0.1 and float(np.linalg.norm(e.velocity_enu_m_s)) < 0.1
+        settle = self._settle = TakeoffSettle(opts.height_m)  # fed every state sample by _on_state
 
-        timeout = 10.0 + 5.0 * opts.height_m
+        def settled() -> bool:
+            return settle.settled
+
+        timeout = opts.takeoff_timeout_s if opts.takeoff_timeout_s is not None else 30.0 + 5.0 * opts.height_m
         if not await self._wait_until(lambda: settled() or self._stop.is_set(), timeout):
-            raise LinkError(f"take-off to {opts.height_m:g} m not reached within {timeout:g} s")
+            e = self.pipeline.estimator.latest
+            where = f" (at {e.position_enu_m[2]:.2f} m, {float(np.linalg.norm(e.velocity_enu_m_s)):.2f} m/s)" if e is not None else ""
+            raise LinkError(f"take-off to {opts.height_m:g} m not held (within {settle.altitude_tol_m:g} m, below "
+                            f"{settle.speed_tol_m_s:g} m/s over {settle.window_s:g} s) within {timeout:g} s{where}; "
+                            "--takeoff-timeout S waits longer")  # fmt: skip
         if self._stop.is_set():
             raise LinkError("interrupted during take-off")
         self._takeoff_target = None
+        self._settle = None
 
     async def _hand_back(self) -> None:
         """Stream the hold setpoint while asking for the hand-back mode, re-sent until the
@@ -967,6 +1089,11 @@ class Bridge:
             f"{head}  η1 {st.eta1:7.2f} m  η2 {st.eta2:+5.2f} m/s  ξ1 {st.xi1:+6.3f} m  φ1 {st.phi1:+6.3f} m  "
             f"e {step.command.cross_track_m:6.3f} m  laps {self.laps.laps:4.2f}  rate {self.loop_rate_hz:5.0f} Hz"
         )
+
+    def _note(self, text: str) -> None:
+        """One line on the status stream even with --quiet (facts the user must know)."""
+        self.status_stream.write(("\r\x1b[K" if self.status_stream.isatty() else "") + text + "\n")
+        self.status_stream.flush()
 
     def _print(self, text: str) -> None:
         if self.options.status:

@@ -12,6 +12,7 @@ import argparse
 import importlib.resources
 import sys
 from pathlib import Path
+from typing import Any
 
 from pf_offboard.errors import InputError
 
@@ -45,6 +46,30 @@ def paper_config() -> Path:
     raise InputError("--config", "configs/paper.yaml not found (run from the repository or pass --config)")
 
 
+# The mock's default ("fast") vehicle: its closed body-rate loop reaches 63 % of a step within
+# 12 ms. The demo knows the vehicle it flies, so rates mode gets the attitude time constant that
+# fits it (4x, at least 0.05 s) instead of the 0.25 s default meant for unknown real autopilots.
+DEMO_VEHICLE_RATE_TIME_CONSTANT_S = 0.012
+
+
+def _with_mock_rate_loop(config: Any, config_path: Path, output: str | None) -> Path:
+    """A copy of the config with ``vehicle.rate_time_constant_s`` of the demo's mock vehicle when
+    it flies ``rates`` and the config says nothing about the rate loop; else ``config_path``."""
+    if (output or config.flight.output_mode) != "rates":
+        return config_path
+    if config.flight.attitude_time_constant_s is not None or config.vehicle.rate_time_constant_s > 0.0:
+        return config_path
+    import tempfile
+
+    import yaml
+
+    data = yaml.safe_load(config_path.read_text()) or {}
+    data.setdefault("vehicle", {})["rate_time_constant_s"] = DEMO_VEHICLE_RATE_TIME_CONSTANT_S
+    out = Path(tempfile.mkdtemp(prefix="pf-offboard-demo-")) / config_path.name
+    out.write_text(yaml.safe_dump(data, sort_keys=False))
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     from sitl_mock.config import MockConfig, SpawnSpec
     from sitl_mock.runner import spawn
@@ -68,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
         from pf_offboard.app.fly import signing_key_from_args
 
         signing_key_from_args(args)  # an unreadable key file is bad input, found before the mock starts
+    config_path = _with_mock_rate_loop(config, config_path, args.output)
     rate_hz = config.flight.setpoint_rate_hz
     # PX4: lockstep (one physics step per setpoint: as fast as the host allows, deterministic).
     # ArduPilot takes off on its own (NAV_TAKEOFF) while we send nothing, which a lockstep clock

@@ -6,8 +6,9 @@ One encoder per output mode (a level of the paper's Fig. 1 cascade):
   yaw rate (position and velocity ignored, type_mask 0x03F);
 - ``attitude``: SET_ATTITUDE_TARGET quaternion + normalised thrust, with the body-rate
   feed-forward the autopilot honours next to a quaternion (PX4: yaw rate only; ArduPilot: all);
-- ``rates``: the app's own attitude controller (P on the quaternion error, time constant τ, plus
-  the core's ω_ff feed-forward) → SET_ATTITUDE_TARGET body rates + thrust, quaternion ignored.
+- ``rates``: the core's attitude-rate law (:class:`pf_offboard.control.AttitudeRateLaw`:
+  tilt-prioritised P on the attitude error, time constant τ, bounded body rates, plus the core's
+  ω_ff feed-forward) → SET_ATTITUDE_TARGET body rates + thrust, quaternion ignored.
 
 Every value is checked finite before it leaves; a non-finite command is replaced by the safe hold
 setpoint (:meth:`Encoder.hold`) and reported through ``Encoded.replaced``.
@@ -26,6 +27,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from pf_offboard import frames
 from pf_offboard.app.estimator import StateEstimate
 from pf_offboard.app.profiles import Profile
+from pf_offboard.control.attitude import DEFAULT_ATTITUDE_TIME_CONSTANT_S, AttitudeRateLaw
 
 G_M_S2 = 9.81  # the paper's g; thrust normalisation divides by it
 
@@ -105,15 +107,12 @@ def attitude_rate_command(
     rates_ff_flu_rad_s: NDArray[np.float64],
     time_constant_s: float,
 ) -> NDArray[np.float64]:
-    """The rates-mode attitude controller (body FLU, rad/s).
+    """The rates-mode attitude controller (body FLU, rad/s) with the default bounds.
 
-    ω = ω_ff + (2/τ) · sign(q_e,w) · q_e,xyz with q_e = q_meas⁻¹ ⊗ q_des: a first-order
-    reduction of the attitude error with time constant τ (small-angle), plus feed-forward.
+    A shortcut for ``AttitudeRateLaw(time_constant_s).update(...)`` (see
+    :mod:`pf_offboard.control.attitude`: tilt-prioritised, bounded body rates).
     """
-    q_conj = np.array([q_meas_enu_flu[0], -q_meas_enu_flu[1], -q_meas_enu_flu[2], -q_meas_enu_flu[3]])
-    q_err = frames.quat_multiply(q_conj, q_des_enu_flu)
-    sign = 1.0 if q_err[0] >= 0.0 else -1.0  # shortest way round
-    return np.asarray(rates_ff_flu_rad_s, dtype=float) + (2.0 / time_constant_s) * sign * q_err[1:]
+    return AttitudeRateLaw(time_constant_s).update(q_des_enu_flu, q_meas_enu_flu, rates_ff_flu_rad_s)
 
 
 def body_z(q_enu_flu: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -126,8 +125,9 @@ class Encoder:
     """Encode commands for one output mode and autopilot profile.
 
     ``hover_thrust`` is the autopilot's normalised hover thrust (0..1) used to scale the
-    thrust of attitude / rates setpoints; ``time_constant_s`` is τ of the rates-mode attitude
-    controller. Pure: same inputs, same message.
+    thrust of attitude / rates setpoints. ``rate_law`` is the rates-mode attitude controller;
+    without it, ``AttitudeRateLaw(time_constant_s)`` (default bounds). Pure: same inputs, same
+    message.
     """
 
     def __init__(
@@ -137,7 +137,8 @@ class Encoder:
         target_system: int,
         target_component: int,
         hover_thrust: float = 0.5,
-        time_constant_s: float = 0.1,
+        time_constant_s: float = DEFAULT_ATTITUDE_TIME_CONSTANT_S,
+        rate_law: AttitudeRateLaw | None = None,
         max_body_rate_rad_s: float | None = None,
     ) -> None:
         if output_mode not in ("acceleration", "attitude", "rates"):
@@ -151,7 +152,8 @@ class Encoder:
         self.target_system = target_system
         self.target_component = target_component
         self.hover_thrust = hover_thrust
-        self.time_constant_s = time_constant_s
+        self.rate_law = rate_law if rate_law is not None else AttitudeRateLaw(time_constant_s)
+        self.time_constant_s = self.rate_law.time_constant_s
         # rates mode: the envelope's bound on what is sent (safety.max_body_rate_rad_s); here, in the
         # pure encoder, so that `replay` reproduces it. None: unbounded.
         if max_body_rate_rad_s is not None and not max_body_rate_rad_s > 0.0:
@@ -162,7 +164,7 @@ class Encoder:
         """The same encoder with the hover thrust read from the autopilot (validated like __init__)."""
         return Encoder(
             self.output_mode, self.profile, self.target_system, self.target_component,
-            hover_thrust=hover_thrust, time_constant_s=self.time_constant_s, max_body_rate_rad_s=self.max_body_rate_rad_s,
+            hover_thrust=hover_thrust, rate_law=self.rate_law, max_body_rate_rad_s=self.max_body_rate_rad_s,
         )  # fmt: skip
 
     # ------------------------------------------------------------------ path-following setpoints
@@ -213,7 +215,7 @@ class Encoder:
             return Encoded(self._attitude_msg(time_boot_ms, mask, q_des, sent, thrust), thrust, sent)  # type: ignore[arg-type]
         # rates: our own attitude loop closes on the measured attitude
         assert est.q_enu_flu is not None
-        rates_flu = attitude_rate_command(q_des, est.q_enu_flu, np.asarray(cmd.body_rates, dtype=float), self.time_constant_s)
+        rates_flu = self.rate_law.update(q_des, est.q_enu_flu, cmd.body_rates)
         # thrust along the current body z: the part of the demand the vehicle can produce now
         projection = float(np.dot(body_z(q_des), body_z(est.q_enu_flu)))
         thrust = thrust_normalised(float(cmd.thrust) * max(projection, _THRUST_PROJECTION_FLOOR), self.hover_thrust)
@@ -267,7 +269,7 @@ class Encoder:
         if self.output_mode == "attitude" or est.q_enu_flu is None:
             mask = _ROLL_RATE_IGNORE | _PITCH_RATE_IGNORE | _YAW_RATE_IGNORE_ATT
             return Encoded(self._attitude_msg(time_boot_ms, mask, level, (0.0, 0.0, 0.0), self.hover_thrust), self.hover_thrust, None, reason or "hold")
-        rates_frd = frames.flu_to_frd(attitude_rate_command(level, est.q_enu_flu, np.zeros(3), self.time_constant_s))
+        rates_frd = frames.flu_to_frd(self.rate_law.update(level, est.q_enu_flu, (0.0, 0.0, 0.0)))
         sent = (float(rates_frd[0]), float(rates_frd[1]), float(rates_frd[2]))
         msg = self._attitude_msg(time_boot_ms, ATTITUDE_IGNORE, np.array([1.0, 0, 0, 0]), sent, self.hover_thrust, ned=True)
         return Encoded(msg, self.hover_thrust, sent, reason or "hold")

@@ -55,6 +55,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--signing-key", metavar="FILE",
                         help="MAVLink 2 signing: sign what we send, drop unsigned / wrongly signed frames. FILE: 32 raw "
                              "bytes, 64 hex digits or a passphrase (SHA-256, as MAVProxy); see the README")  # fmt: skip
+    parser.add_argument("--experimental-output", action="store_true",
+                        help="fly an output mode the app refuses on this autopilot (ArduPilot acceleration: "
+                             "measured to oscillate by metres); experimental")  # fmt: skip
+    parser.add_argument("--ready-timeout", type=float, default=120.0, metavar="S",
+                        help="--takeoff/--airborne: wait up to S seconds for the position estimate and arming checks (default 120)")  # fmt: skip
+    parser.add_argument("--takeoff-timeout", type=float, metavar="S",
+                        help="--takeoff: give up if the take-off altitude is not held within S seconds (default 30 + 5 s per metre)")  # fmt: skip
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/<UTC timestamp>/")
     parser.add_argument("--quiet", action="store_true", help="no status line")
 
@@ -85,7 +92,7 @@ def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
         state_timeout_s=float(get("state_timeout_s", 0.5)),
         hover_thrust=get("hover_thrust", None),
         end_action=args.end_action or get("end_action", "hold"),
-        attitude_time_constant_s=float(get("attitude_time_constant_s", 0.05)),
+        attitude_time_constant_s=_attitude_time_constant(config, get("attitude_time_constant_s", None)),
     )
     if s.output_mode not in ("acceleration", "attitude", "rates"):
         raise InputError("flight.output_mode", f"must be acceleration, attitude or rates, got {s.output_mode!r}")
@@ -100,6 +107,17 @@ def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
     if not (math.isfinite(s.attitude_time_constant_s) and 0.01 <= s.attitude_time_constant_s <= 2.0):
         raise InputError("flight.attitude_time_constant_s", f"must be in [0.01, 2] s, got {s.attitude_time_constant_s}")
     return s
+
+
+def _attitude_time_constant(config: Any, configured: Any) -> float:
+    """Rates mode's τ (s): ``flight.attitude_time_constant_s`` if set, else derived from the
+    identified rate loop (``vehicle.rate_time_constant_s``: 4x it), else the default 0.25 s."""
+    from pf_offboard.control.attitude import AttitudeRateLaw
+
+    if configured is not None:
+        return float(configured)
+    rate_tc = getattr(getattr(config, "vehicle", None), "rate_time_constant_s", 0.0) or 0.0
+    return AttitudeRateLaw.for_rate_loop(float(rate_tc)).time_constant_s
 
 
 def _heights_from_config(args: argparse.Namespace, config: Any) -> None:
@@ -125,6 +143,9 @@ def _check_args(args: argparse.Namespace) -> None:
         raise InputError("--duration", f"must be > 0 s, got {args.duration}")
     if not (math.isfinite(args.heartbeat_timeout) and args.heartbeat_timeout > 0):
         raise InputError("--heartbeat-timeout", f"must be > 0 s, got {args.heartbeat_timeout}")
+    for flag, value in (("--ready-timeout", getattr(args, "ready_timeout", 120.0)), ("--takeoff-timeout", getattr(args, "takeoff_timeout", None))):
+        if value is not None and not (math.isfinite(value) and 0 < value <= 3600):
+            raise InputError(flag, f"must be in (0, 3600] s, got {value}")
     if args.target_system is not None and not 1 <= args.target_system <= 255:
         raise InputError("--target-system", f"must be a MAVLink system id in 1..255, got {args.target_system}")
 
@@ -245,7 +266,7 @@ async def _fly(
     from pf_offboard.app.estimator import Estimator
     from pf_offboard.app.link import Link
     from pf_offboard.app.pipeline import Pipeline
-    from pf_offboard.app.profiles import Autopilot, select_profile
+    from pf_offboard.app.profiles import Autopilot, output_mode_refusal, select_profile
     from pf_offboard.control import PathFollower
     from pf_offboard.logs.flightlog import FlightLog
     from pf_offboard.logs.summary import SummaryAccumulator
@@ -260,6 +281,12 @@ async def _fly(
     try:
         target = await link.wait_heartbeat(args.heartbeat_timeout, args.target_system)
         profile = select_profile(args.autopilot, target.autopilot)
+        refusal = output_mode_refusal(profile, settings.output_mode)
+        if refusal:
+            if not getattr(args, "experimental_output", False):
+                # before the log, the reader and any command or setpoint
+                raise InputError("--output", f"{settings.output_mode} refused on {profile.name}: {refusal}")
+            print(f"pf-offboard fly: warning: {settings.output_mode} on {profile.name} is experimental: {refusal}", file=stream)
         link.set_source_system(target.system)
         log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
         try:
@@ -281,6 +308,8 @@ async def _fly(
             setpoint_rate_hz=settings.setpoint_rate_hz,
             state_timeout_s=settings.state_timeout_s,
             status=not args.quiet,
+            ready_timeout_s=getattr(args, "ready_timeout", 120.0),
+            takeoff_timeout_s=getattr(args, "takeoff_timeout", None),
         )
         encoder = Encoder(
             settings.output_mode, profile, target.system, target.component,
@@ -306,7 +335,13 @@ async def _fly(
             state_id = mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED if args.state_source == "local_position" else mavlink2.MAVLINK_MSG_ID_ODOMETRY
             # each request three times: idempotent, and a lossy link must not leave HEARTBEAT at 1 Hz
             # (the lost-HEARTBEAT watchdog counts on it)
-            for _ in range(3):
+            state_name = "LOCAL_POSITION_NED" if args.state_source == "local_position" else "ODOMETRY"
+            await bridge.request_intervals([
+                (state_id, settings.setpoint_rate_hz, state_name),
+                (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz, "ATTITUDE_QUATERNION"),
+                (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0, "HEARTBEAT"),
+            ])  # fmt: skip
+            for _ in range(2):  # twice more, not waited for: idempotent
                 for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
                     bridge.request_interval(msg_id, rate)
             if settings.hover_thrust is None and settings.output_mode != "acceleration":

@@ -158,6 +158,26 @@ def check_output_mode(output_mode: str) -> str:
     return output_mode
 
 
+EXPERIMENTAL_OUTPUT_FLAG = "--experimental-output"
+
+
+def output_mode_refusal(profile: Profile, output_mode: str) -> str:
+    """Why ``fly`` refuses ``output_mode`` on this autopilot by default ("" if it does not).
+
+    Measured on the real autopilots (issue 8): ArduPilot integrates acceleration targets into its
+    own velocity/position targets and jerk-limits them (PSC_JERK_XY/Z); on ArduCopter SITL
+    `acceleration` output oscillated by metres even with PSC_JERK_XY/Z = 50, while `attitude`
+    (1.5 Hz / 1.0 gains: 6.6 cm cross-track RMS) and `rates` (τ = 0.25 s: 4 cm) followed the path.
+    """
+    if profile.autopilot is Autopilot.ARDUPILOT and output_mode == "acceleration":
+        return (
+            "ArduPilot jerk-limits and integrates acceleration targets (PSC_JERK_XY/Z); on ArduCopter SITL this output "
+            "oscillated by metres even with PSC_JERK_XY/Z = 50. Use --output attitude on ArduPilot "
+            f"(or rates); {EXPERIMENTAL_OUTPUT_FLAG} flies it anyway"
+        )
+    return ""
+
+
 def is_armed(base_mode: int) -> bool:
     """Armed flag of a HEARTBEAT base_mode (bit 128, same on both autopilots)."""
     return bool(base_mode & MAV_MODE_FLAG_SAFETY_ARMED)

@@ -1,8 +1,14 @@
-"""Path-following control: exact transverse coordinates, TFL law with limits, feed-forward (issue 2).
+"""Path-following control: exact transverse coordinates, TFL law with limits, feed-forward (issue 2),
+and the attitude → body-rate law for rates-mode users (issue 8).
 
 See docs/controller.md.
 """
 
+from pf_offboard.control.attitude import (
+    DEFAULT_ATTITUDE_TIME_CONSTANT_S,
+    AttitudeRateLaw,
+    AttitudeRates,
+)
 from pf_offboard.control.follower import PathFollower, evaluate_terms
 from pf_offboard.control.transverse import ExactTerms, exact_terms
 from pf_offboard.control.types import (
@@ -17,6 +23,9 @@ from pf_offboard.control.types import (
 )
 
 __all__ = [
+    "DEFAULT_ATTITUDE_TIME_CONSTANT_S",
+    "AttitudeRateLaw",
+    "AttitudeRates",
     "GRAVITY_M_S2",
     "Command",
     "ExactTerms",

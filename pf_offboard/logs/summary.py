@@ -8,6 +8,9 @@ Definitions (all over *active* steps, i.e. while the follower's setpoints were s
   (None when the flight never settles);
 - cross-track RMS / max: over active steps from convergence on;
 - speed error RMS: of ``eta2 - eta2_ref`` over the same steps;
+- whole flight: cross-track RMS / max and speed error RMS / mean over *every* active step from
+  activation on (always given when there are active steps, also when the convergence rule
+  never holds, e.g. on a real vehicle whose GPS noise keeps it beyond 5 cm);
 - saturation time: per limit, the summed duration of active steps whose flag is set (each
   step counts for the interval to the next step);
 - mode changes: (time, from, to) whenever the ``mode`` column changes, and logged events.
@@ -37,6 +40,11 @@ class FlightSummary:
     saturation_s: dict[str, float]
     mode_changes: tuple[tuple[float, str, str], ...]
     events: tuple[tuple[float, str], ...]
+    # over every active step (from activation on); None without active steps
+    whole_cross_track_rms_m: float | None = None
+    whole_cross_track_max_m: float | None = None
+    whole_speed_error_rms_m_s: float | None = None
+    whole_speed_error_mean_m_s: float | None = None
 
     def lines(self) -> list[str]:
         """Human-readable summary, one fact per line."""
@@ -51,6 +59,9 @@ class FlightSummary:
             f"cross-track RMS     {f(self.cross_track_rms_m, 'm', '.4f')} (after convergence)",
             f"cross-track max     {f(self.cross_track_max_m, 'm', '.4f')} (after convergence)",
             f"speed error RMS     {f(self.speed_error_rms_m_s, 'm/s', '.4f')} (after convergence)",
+            f"whole flight        cross-track RMS {f(self.whole_cross_track_rms_m, 'm', '.4f')}, max {f(self.whole_cross_track_max_m, 'm', '.4f')}; "
+            f"speed error RMS {f(self.whole_speed_error_rms_m_s, 'm/s', '.4f')}, mean {f(self.whole_speed_error_mean_m_s, 'm/s', '+.4f')} "
+            "(all active steps)",
             "saturation          " + ", ".join(f"{k.removeprefix('sat_')} {v:.2f} s" for k, v in self.saturation_s.items()),
         ]
         for t, a, b in self.mode_changes:
@@ -93,6 +104,10 @@ class SummaryAccumulator:
         self._ct2 = 0.0
         self._ct_max = -math.inf
         self._err2 = 0.0
+        # the whole flight (every finite active step): count, sums of squares, max, sum
+        self._w_nc = self._w_ne = 0
+        self._w_ct2 = self._w_err2 = self._w_err = 0.0
+        self._w_ct_max = -math.inf
 
     def add(self, r: StepRecord) -> None:
         t = r.time_s
@@ -122,6 +137,14 @@ class SummaryAccumulator:
             self._t_act = t
         ct = r.cross_track_m
         err = r.eta2_m_s - r.speed_ref_m_s
+        if math.isfinite(ct):
+            self._w_nc += 1
+            self._w_ct2 += ct * ct
+            self._w_ct_max = max(self._w_ct_max, ct)
+        if math.isfinite(err):
+            self._w_ne += 1
+            self._w_err2 += err * err
+            self._w_err += err
         good = ct <= self.cross_track_tol_m and abs(err) <= self.speed_tol_m_s  # False for NaN
         if not good:
             self._conv_t, self._n, self._ct2, self._ct_max, self._err2 = None, 0, 0.0, -math.inf, 0.0
@@ -162,6 +185,10 @@ class SummaryAccumulator:
             saturation_s=saturation,
             mode_changes=tuple(self._modes),
             events=events,
+            whole_cross_track_rms_m=math.sqrt(self._w_ct2 / self._w_nc) if self._w_nc else None,
+            whole_cross_track_max_m=self._w_ct_max if self._w_nc else None,
+            whole_speed_error_rms_m_s=math.sqrt(self._w_err2 / self._w_ne) if self._w_ne else None,
+            whole_speed_error_mean_m_s=self._w_err / self._w_ne if self._w_ne else None,
         )
 
 

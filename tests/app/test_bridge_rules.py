@@ -4,7 +4,9 @@ import math
 
 import pytest
 
-from pf_offboard.app.bridge import EndSpec, LapCounter, ThrowTrigger, end_reason, param_value_decode, param_value_encode
+import numpy as np
+
+from pf_offboard.app.bridge import EndSpec, LapCounter, TakeoffSettle, ThrowTrigger, end_reason, param_value_decode, param_value_encode
 from pf_offboard.errors import InputError
 
 
@@ -39,7 +41,7 @@ def test_throw_height_must_be_positive() -> None:
 
 
 def test_lap_counter_wraps_on_closed_paths_either_direction() -> None:
-    laps = LapCounter(10.0, closed=True)
+    laps = LapCounter(10.0, closed=True)  # no direction given: either way round
     eta = 9.0
     for _ in range(30):  # backwards (eta2 < 0) through the wrap, 0.5 m per step
         laps.update(eta)
@@ -50,6 +52,54 @@ def test_lap_counter_wraps_on_closed_paths_either_direction() -> None:
         open_laps.update(e)
     assert open_laps.laps == pytest.approx(0.5)
     assert open_laps.update(math.nan) == pytest.approx(0.5)
+
+
+def test_laps_count_net_progress_not_jitter() -> None:
+    """A vehicle jittering in place for 356 s (here: ±5 cm at 50 Hz around η1 = 3 m, and around
+    the closed path's start point where η1 wraps) completes 0 laps; the old |Δη1| sum gave ~35."""
+    rng = np.random.default_rng(0)
+    for centre in (3.0, 0.0):
+        for direction in (-1.5, 1.5, None):
+            laps = LapCounter(15.578, closed=True, direction=direction)
+            for _ in range(int(356 * 50)):
+                laps.update((centre + rng.uniform(-0.05, 0.05)) % 15.578)
+            assert laps.laps < 0.01, (centre, direction, laps.laps)
+
+
+def test_laps_count_in_the_direction_of_travel_only() -> None:
+    laps = LapCounter(10.0, closed=True, direction=-1.0)  # eta2_ref < 0: eta1 decreasing
+    eta = 1.0
+    for _ in range(40):  # forwards (decreasing) through the wrap, 0.5 m per step, with a wobble
+        laps.update(eta)
+        laps.update((eta + 0.2) % 10.0)  # back 0.2 m, then on
+        eta = (eta - 0.5) % 10.0
+    assert laps.laps == pytest.approx((39 * 0.5 - 0.2) / 10.0)  # net: the last step back 0.2 m counts against
+    against = LapCounter(10.0, closed=True, direction=+1.0)
+    for k in range(40):
+        against.update((1.0 - 0.5 * k) % 10.0)
+    assert against.laps == 0.0  # travelling the wrong way is no progress
+
+
+def test_takeoff_settle_tolerates_gps_hover_but_not_a_climb() -> None:
+    """Settled when, over 1 s, the mean altitude error is within 0.3 m and the mean speed below
+    0.5 m/s: a GPS vehicle holding 2 m at 0.13-0.43 m/s settles (the old 0.1 m / 0.1 m/s per-sample
+    rule never held); a vehicle still climbing through 2 m does not."""
+    rng = np.random.default_rng(1)
+    hover = TakeoffSettle(2.0)
+    t = 0.0
+    results = []
+    for _ in range(100):  # 2 s at 50 Hz
+        t += 0.02
+        results.append(hover.update(t, 2.0 + rng.uniform(-0.15, 0.15), rng.uniform(0.13, 0.43)))
+    assert not any(results[:49]) and results[-1]  # needs a full 1 s window, then holds
+    climbing = TakeoffSettle(2.0)
+    t = 0.0
+    for k in range(150):  # climbing at 1 m/s from 0.5 m to 3.5 m
+        t += 0.02
+        assert not climbing.update(t, 0.5 + 1.0 * 0.02 * k, 1.0)
+    drifting = TakeoffSettle(2.0)
+    assert not any(drifting.update(0.02 * k, 2.0, 0.8) for k in range(200))  # too fast on average
+    assert not TakeoffSettle(2.0).update(0.0, 2.0, 0.0)  # one sample is not a window
 
 
 def test_end_reasons() -> None:

@@ -46,7 +46,8 @@ def test_converges_and_tracks_one_lap(tmp_path, profile: str, output: str) -> No
             if ardupilot_accel:
                 mock.call(lambda m: m.autopilot.params.update(PSC_JERK_XY=50.0, PSC_JERK_Z=50.0))
             assert mock.call(lambda m: m.autopilot.mode.name) == "LOITER"  # the app switches to GUIDED
-            outcome = run_fly(mock.ports.udp, config, tmp_path / "log", *flags, "--set-guid-options")
+            experimental = ["--experimental-output"] if ardupilot_accel else []  # refused by default (see below)
+            outcome = run_fly(mock.ports.udp, config, tmp_path / "log", *flags, "--set-guid-options", *experimental)
             bits = int(mock.call(lambda m: m.autopilot.params["GUID_OPTIONS"]))
         assert bits & GUID_BITS[output] == GUID_BITS[output]  # the app set what the mode needs
     assert outcome.exit_code == 0, outcome.reason
@@ -275,6 +276,26 @@ def test_ardupilot_guid_options_refused_is_exit_2_and_nothing_flown(tmp_path, ca
     out = [e.message for e in read_tlog(tmp_path / "log" / "flight.tlog") if e.direction == "out"]
     assert "PARAM_SET" not in {m.get_type() for m in out}
     assert not [m for m in out if m.get_type() == "COMMAND_LONG" and m.command == 176]  # MAV_CMD_DO_SET_MODE
+
+
+def test_ardupilot_acceleration_is_refused_with_the_mode_to_use(tmp_path, capsys) -> None:
+    """ArduPilot acceleration output (measured to oscillate by metres on ArduCopter SITL): one line
+    giving the reason and the mode to use, exit 2, no command or setpoint sent at all."""
+    from pf_offboard.cli import main
+
+    config = write_config(tmp_path)
+    with run_in_thread(mock_config("ardupilot", "hover:" + ",".join(map(str, HOVER_NED)))) as mock:
+        code = main(["fly", "--connect", f"udpout:127.0.0.1:{mock.ports.udp}", "--config", str(config), "--airborne",
+                     "--output", "acceleration", "--set-guid-options", "--quiet", "--heartbeat-timeout", "5",
+                     "--log-dir", str(tmp_path / "log")])  # fmt: skip
+        assert mock.call(lambda m: m.autopilot.mode.name) == "LOITER"
+        assert int(mock.call(lambda m: m.autopilot.params["GUID_OPTIONS"])) == 0  # not even a PARAM_SET
+    err = capsys.readouterr().err
+    assert code == 2, err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and "--output" in lines[0] and "use --output attitude" in lines[0].lower(), err
+    assert "PSC_JERK" in lines[0] and "--experimental-output" in lines[0]
+    assert "Traceback" not in err
 
 
 def test_end_action_land_hands_back_in_land_mode(tmp_path) -> None:

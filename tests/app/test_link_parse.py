@@ -113,3 +113,47 @@ def test_serial_endpoint_that_cannot_open_is_a_link_error() -> None:
         Link.open(parse_endpoint("serial:/dev/pf-offboard-no-such-device:57600"))
     if importlib.util.find_spec("serial") is None:
         assert "pip install pyserial" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("flight", "vehicle", "expected_s"),
+    [({}, {}, 0.25), ({}, {"rate_time_constant_s": 0.05}, 0.2), ({"attitude_time_constant_s": 0.1}, {"rate_time_constant_s": 0.05}, 0.1)],
+)  # fmt: skip
+def test_rates_time_constant_default_derived_or_pinned(tmp_path, flight: dict, vehicle: dict, expected_s: float) -> None:
+    """τ: the config's flight.attitude_time_constant_s if set; else 4 x vehicle.rate_time_constant_s;
+    else the safe default 0.25 s (the old 0.05 s tumbled real PX4 and ArduPilot vehicles)."""
+    import argparse
+
+    import yaml
+
+    from pf_offboard.app.fly import add_arguments, flight_settings
+    from pf_offboard.config import load_config
+
+    data = yaml.safe_load(open("configs/paper.yaml"))
+    data["flight"].update(output_mode="rates", **flight)
+    if vehicle:
+        data["vehicle"] = vehicle
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(data))
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", str(path), "--airborne"])
+    assert flight_settings(load_config(path), args).attitude_time_constant_s == pytest.approx(expected_s)
+
+
+def test_ready_and_takeoff_timeouts_are_validated() -> None:
+    import argparse
+
+    from pf_offboard.app.fly import _check_args, add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", "x.yaml", "--takeoff", "2"])
+    assert args.ready_timeout == 120.0 and args.takeoff_timeout is None
+    _check_args(args)
+    for flag in ("--ready-timeout", "--takeoff-timeout"):
+        for bad in ("0", "nan", "-5"):
+            args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", "x.yaml", "--takeoff", "2", flag, bad])
+            with pytest.raises(InputError) as info:
+                _check_args(args)
+            assert info.value.field == flag
