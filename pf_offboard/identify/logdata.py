@@ -8,9 +8,12 @@ Clocks: every sample is put on the **autopilot's boot clock** (seconds). Telemet
 (``time_boot_ms``); so do pf-offboard's setpoints: each is stamped with the boot time of the
 telemetry sample it answers and sent at once, which places it exactly (the few milliseconds of
 transport then count as delay only where they are not already in the telemetry's own latency).
-For setpoints without such stamps the tlog's UNIX stamps are mapped through a line fitted to the
-LOCAL_POSITION_NED receptions (slope and offset: a SITL's clock need not run at wall-clock rate;
-offset at the lower envelope, the fastest delivery).
+Whether a log's setpoints carry such stamps is judged by the log's *order* alone: a stamp must lie
+near the boot time of the latest LOCAL_POSITION_NED received before the setpoint was sent (no
+wall clock involved: a lockstep simulator's boot clock runs at any multiple of wall-clock time,
+and not evenly). For setpoints without such stamps the tlog's UNIX stamps are mapped through a
+line fitted to the LOCAL_POSITION_NED receptions (slope and offset: a SITL's clock need not run
+at wall-clock rate; offset at the lower envelope, the fastest delivery).
 
 Active samples: a setpoint counts when it is an acceleration setpoint (SET_POSITION_TARGET_LOCAL_NED
 with position ignored and acceleration used), or a SET_ATTITUDE_TARGET (quaternion + thrust, or
@@ -39,6 +42,8 @@ from pf_offboard.errors import InputError
 
 SETPOINT_KINDS = ("acceleration", "attitude", "rates")
 MAX_SETPOINT_AGE_S = 0.25  # a setpoint older than this no longer describes what the vehicle flies
+STAMP_TOLERANCE_S = 1.0  # a setpoint's boot stamp vs the latest telemetry received before it was sent
+CLOCK_SLOPE_RANGE = (0.02, 50.0)  # UNIX s per boot s a (lockstep) simulator may plausibly run at
 MIN_SEGMENT_S = 1.0  # shorter active stretches are dropped
 THRUST_NORM_G_M_S2 = 9.81  # the encoders' thrust normalisation: thrust = T / 9.81 * hover_thrust
 HOVER_THRUST_PARAMS = ("MPC_THR_HOVER", "MOT_THST_HOVER")
@@ -108,6 +113,7 @@ class _Raw:
     hb_active: list[bool]
     sp_unix: list[float]
     sp_boot: list[float]
+    sp_lpn_boot: list[float]  # boot time of the latest LOCAL_POSITION_NED received before it (−inf: none)
     sp_kind: list[str]
     sp_accel_ned: list[tuple[float, float, float]]
     sp_q_ned_frd: list[tuple[float, float, float, float]]
@@ -128,7 +134,7 @@ def _heartbeat_active(msg: Any) -> bool:
 def _read_raw(path: Path) -> _Raw:
     from pf_offboard.logs.tlog import iter_tlog
 
-    raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], [], {}, None)
+    raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], {}, None)
     last_lpn_t = -math.inf
     for entry in iter_tlog(path):
         msg = entry.message
@@ -162,6 +168,7 @@ def _read_raw(path: Path) -> _Raw:
             ok = msg.coordinate_frame == _MAV_FRAME_LOCAL_NED and mask & _POS_IGNORE == _POS_IGNORE and not mask & _ACC_IGNORE
             raw.sp_unix.append(entry.time_unix_s)
             raw.sp_boot.append(msg.time_boot_ms * 1e-3)
+            raw.sp_lpn_boot.append(last_lpn_t)
             raw.sp_kind.append("acceleration" if ok else "other")
             raw.sp_accel_ned.append((msg.afx, msg.afy, msg.afz))
             raw.sp_q_ned_frd.append((1.0, 0.0, 0.0, 0.0))
@@ -170,6 +177,7 @@ def _read_raw(path: Path) -> _Raw:
         elif kind == "SET_ATTITUDE_TARGET":
             raw.sp_unix.append(entry.time_unix_s)
             raw.sp_boot.append(msg.time_boot_ms * 1e-3)
+            raw.sp_lpn_boot.append(last_lpn_t)
             raw.sp_kind.append("rates" if msg.type_mask & _ATTITUDE_IGNORE else "attitude")
             raw.sp_accel_ned.append((math.nan, math.nan, math.nan))
             raw.sp_q_ned_frd.append(tuple(float(c) for c in msg.q))  # type: ignore[arg-type]
@@ -183,7 +191,10 @@ def _clock_map(raw: _Raw) -> tuple[float, float]:
     t = np.asarray(raw.lpn_t)
     u = np.asarray(raw.lpn_unix)
     slope, offset = np.polyfit(t - t[0], u - u[0], 1)
-    if not 0.5 < slope < 2.0:  # not a clock: a paused or replayed log; assume real time
+    # a lockstep simulator runs its boot clock at whatever rate the host allows (often several
+    # times wall-clock time); only a slope no simulator could run at means "not a clock" (a paused
+    # or replayed log): then assume real time
+    if not CLOCK_SLOPE_RANGE[0] < slope < CLOCK_SLOPE_RANGE[1]:
         slope = 1.0
     resid = (u - u[0]) - slope * (t - t[0])
     offset = float(u[0] + np.percentile(resid, 2.0) - slope * t[0])
@@ -197,15 +208,25 @@ def _setpoint_times(raw: _Raw, lpn_t: NDArray[np.float64], slope: float, offset:
     (``time_boot_ms``) and sends it at once: when (nearly) all setpoints carry such stamps, they are
     used — exact, and immune to wall-clock jitter (a lockstep simulator's wall clock does not run
     evenly). Otherwise (another sender), the UNIX stamps go through the fitted clock line.
+
+    A stamp counts when it is within ``STAMP_TOLERANCE_S`` of the boot time of the latest
+    LOCAL_POSITION_NED logged before the setpoint: the log's order, not its UNIX stamps, decides
+    (comparing against the fitted clock line fails whenever the boot clock does not run at the
+    line's rate, e.g. a lockstep simulator running several times faster than real time). In a
+    stamped log the few unstamped setpoints (e.g. take-off setpoints sent before any telemetry)
+    take that latest telemetry time, so every setpoint stays on the one clock and in sending order.
     """
     boot = np.asarray(raw.sp_boot, dtype=float)
     unix_mapped = (np.asarray(raw.sp_unix) - offset) / slope
     if len(boot) == 0:
         return unix_mapped
-    inside = (boot >= lpn_t[0] - 1.0) & (boot <= lpn_t[-1] + 1.0) & (boot > 0.0)
-    if np.mean(inside) >= 0.9 and np.all(np.abs(boot[inside] - unix_mapped[inside]) < 5.0):
-        return np.where(inside, boot, unix_mapped)
-    return unix_mapped
+    received = np.asarray(raw.sp_lpn_boot, dtype=float)
+    stamped = (boot > 0.0) & np.isfinite(received) & (np.abs(boot - received) <= STAMP_TOLERANCE_S)
+    if np.mean(stamped) < 0.9:
+        return unix_mapped
+    times = np.where(stamped, boot, received)  # −inf: sent before any telemetry, never flying
+    # sent in this order: a setpoint never takes effect before the one sent ahead of it
+    return np.maximum.accumulate(times)
 
 
 def _hover_thrust(

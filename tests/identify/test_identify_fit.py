@@ -56,6 +56,19 @@ def test_samples_before_offboard_are_not_used(tmp_path) -> None:
     assert log.duration_s == pytest.approx(12.0, abs=0.3)
 
 
+@pytest.mark.parametrize("clock_rate", [0.1, 0.25, 4.0])
+def test_a_lockstep_clock_far_from_real_time_keeps_the_whole_flight(tmp_path, clock_rate) -> None:
+    # a lockstep simulator's boot clock runs at any multiple of wall-clock time (the mock over
+    # loopback: several times faster): the setpoints' boot stamps must still be recognised (by the
+    # log's order, not by a wall-clock line), and the whole OFFBOARD stretch kept
+    path = write_tlog(tmp_path / "lockstep.tlog", duration_s=20.0, offboard_from_s=4.0, clock_rate=clock_rate)
+    log = load_log(path)
+    assert log.clock_slope == pytest.approx(clock_rate, rel=1e-3)
+    assert len(log.segments) == 1
+    assert log.segments[0].time_s[0] >= 4.0
+    assert log.duration_s == pytest.approx(16.0, abs=0.3)
+
+
 def test_vehicle_model_keeps_each_groups_rise() -> None:
     from pf_offboard.identify.fit import AxisFit, Identification
 
