@@ -32,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--connect", required=True, metavar="ENDPOINT",
                         help="udpin:HOST:PORT | udpout:HOST:PORT | tcp:HOST:PORT | serial:DEVICE:BAUD "
                              "(PX4 SITL: udpin:0.0.0.0:14540; ArduPilot SITL: tcp:127.0.0.1:5760)")  # fmt: skip
-    parser.add_argument("--config", required=True, metavar="YAML", help="path, speed, gains, limits and flight: settings")
+    parser.add_argument("--config", required=True, metavar="YAML", help="config file, or a shipped config's name (pf-offboard configs)")
     launch = parser.add_mutually_exclusive_group(required=True)
     launch.add_argument("--takeoff", type=float, nargs="?", const=FROM_CONFIG, metavar="H",
                         help="arm, take off to H metres (default flight.takeoff_altitude_m), then follow")  # fmt: skip
@@ -151,7 +151,10 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None) -> FlyOut
     from pf_offboard.app.link import parse_endpoint
     from pf_offboard.config import load_config
 
+    from pf_offboard.shipped import resolve_config
+
     endpoint = parse_endpoint(args.connect)  # InputError before anything is opened
+    args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     config = load_config(args.config)
     _heights_from_config(args, config)
     _check_args(args)

@@ -356,6 +356,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--hover-thrust", f"must be in [0.05, 0.95] (normalised), got {args.hover_thrust}")
     if Path(args.log).is_dir():
         raise InputError("LOG", f"{args.log} is a directory; give its .tlog (e.g. {Path(args.log) / 'flight.tlog'})")
+    if args.config:
+        from pf_offboard.shipped import resolve_config
+
+        args.config = str(resolve_config(args.config))
     config_path = Path(args.config) if args.config else FlightLogPaths.beside(args.log).config_yaml
     if not config_path.exists():
         raise InputError("--config", f"no such file: {config_path}" + ("" if args.config else " (pass --config)"))

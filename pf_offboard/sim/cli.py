@@ -6,7 +6,7 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", required=True, metavar="YAML", help="path, speed, gains, limits, flight settings")
+    parser.add_argument("--config", required=True, metavar="YAML", help="config file, or a shipped config's name (pf-offboard configs)")
     start = parser.add_mutually_exclusive_group()
     start.add_argument("--start", metavar="X,Y,Z", help="hover start, world ENU metres (z up); default: the path's start")
     start.add_argument("--throw", metavar="X,Y,Z,VX,VY,VZ",
@@ -32,8 +32,9 @@ def run(args: argparse.Namespace) -> int:
     from pf_offboard.logs._io import make_dir
     from pf_offboard.sim.flight import SimSpec, parse_start, parse_throw, simulate
 
-    if not Path(args.config).is_file():
-        raise InputError("--config", f"no such file: {args.config}")
+    from pf_offboard.shipped import resolve_config
+
+    args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     spec = SimSpec(
         start_enu_m=parse_start(args.start) if args.start else None,
         throw_enu=parse_throw(args.throw) if args.throw else None,
