@@ -168,6 +168,10 @@ class SimFlight:
         self.spec = spec
         self.config_path = Path(config_path)
         config = load_config(self.config_path)
+        if config.needs_origin:
+            raise InputError("path.origin", "the path is in latitude/longitude (path.file) and sim has no vehicle to read "
+                             "the origin from: add path.origin: [lat_deg, lon_deg, alt_amsl_m]")  # fmt: skip
+        self.config = config
         settings = flight_settings(config, argparse.Namespace(output=spec.output_mode, end_action=None))
         self.settings = settings
         rate = spec.rate_hz if spec.rate_hz is not None else min(settings.setpoint_rate_hz, MAX_RATE_HZ)
@@ -331,7 +335,7 @@ class SimFlight:
             speed = max(abs(self.pipeline.speed_ref_m_s), 0.1) if math.isfinite(self.pipeline.speed_ref_m_s) else 1.0
             limit_s = 30.0 + 3.0 * (spec.laps or 1.0) * self.path.length_m / speed
         max_steps = int(math.ceil(limit_s / self.dt_s)) + 1
-        with FlightLog.open(self.out_dir, spec.name, config_path=self.config_path) as log:
+        with FlightLog.open(self.out_dir, spec.name, config_path=self.config_path, config=self.config) as log:
             self._setup(log)
             for _ in range(max_steps):
                 self._inbox.extend(msg for _, msg in self.autopilot.due_telemetry())
