@@ -185,7 +185,8 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     from pf_offboard.logs.steplog import read_steplog
     from pf_offboard.logs.summary import summarize
 
-    follower = PathFollower.from_config(config)
+    # a path in latitude / longitude is built once the vehicle's origin is known (below)
+    follower = PathFollower.from_config(config) if config.path.geodetic is None else None
     link = Link.open(endpoint)
     log: FlightLog | None = None
     try:
@@ -200,6 +201,15 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
         flight_log = log
         link.on_received = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
         link.on_sent = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
+        if config.path.geodetic is not None:
+            # a path in latitude / longitude: into the vehicle's local frame (its EKF origin), refused
+            # if out of bounds, before any setpoint or command; the log keeps the local way-points
+            from pf_offboard.app.origin import localise_config
+
+            config = await localise_config(link, config, stream)
+            flight_log.write_config(args.config, config)
+            follower = PathFollower.from_config(config)
+        assert follower is not None
 
         launch = "takeoff" if args.takeoff is not None else "throw" if args.throw is not None else "airborne"
         height = args.takeoff if args.takeoff is not None else args.throw if args.throw is not None else math.nan
