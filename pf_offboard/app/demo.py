@@ -26,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/demo-<UTC timestamp>/")
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
     parser.add_argument("--quiet", action="store_true", help="no status line")
+    parser.add_argument("--json", action="store_true", help="print the flight report (LOG_DIR/summary.json) as JSON on stdout")
 
 
 def paper_config() -> Path:
@@ -88,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
             flags.append("--set-guid-options")
         if args.quiet:
             flags.append("--quiet")
+        if args.json:
+            flags.append("--json")
         outcome = fly(parser.parse_args(flags))
     if outcome.exit_code == 0 and outcome.log_dir is not None and not args.no_plots:
         try:

@@ -52,6 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ArduPilot: set the GUID_OPTIONS bits the output mode needs instead of refusing")  # fmt: skip
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/<UTC timestamp>/")
     parser.add_argument("--quiet", action="store_true", help="no status line")
+    parser.add_argument("--json", action="store_true", help="print the flight report (as in LOG_DIR/summary.json) as JSON on stdout")
 
 
 @dataclass(frozen=True)
@@ -284,7 +285,18 @@ async def _fly(args: argparse.Namespace, endpoint: Any, config: Any, settings: F
     records = read_steplog(log.paths.steps_csv)
     summary = summarize(records) if records else None
     _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
+    _write_summary_json(args, result.exit_code, result.reason, summary, log.paths.tlog.parent, config)
     return FlyOutcome(result.exit_code, result.reason, log.paths.tlog.parent, records, summary, result.activation_time_s)
+
+
+def _write_summary_json(args: argparse.Namespace, code: int, reason: str, summary: Any, log_dir: Path, config: Any) -> None:
+    """``LOG_DIR/summary.json`` always; with ``--json`` the same report on stdout."""
+    from pf_offboard.logs.summary import flight_report, report_json, write_report
+
+    report = flight_report(summary, code, reason, log_dir, config)
+    write_report(report, log_dir)
+    if getattr(args, "json", False):
+        print(report_json(report))
 
 
 def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[type-arg]

@@ -345,6 +345,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--state-source", choices=("local_position", "odometry"),
                         help="state telemetry the flight followed (default: the stream it requested)")  # fmt: skip
     parser.add_argument("--hover-thrust", type=float, help="normalised hover thrust (default: config, else logged parameter)")
+    parser.add_argument("--json", action="store_true", help="print the report and flight summary as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -372,6 +373,14 @@ def run(args: argparse.Namespace) -> int:
         tolerance=args.tolerance,
     )
     report = replay_flight(args.log, config, args.steps, options)
+    if args.json:
+        from pf_offboard.logs.summary import flight_report, report_json
+
+        doc = flight_report(report.summary, 0 if report.ok else 1, "replay " + ("matches" if report.ok else "differs"),
+                            Path(args.log).parent, config, "replay")  # fmt: skip
+        doc["replay_lines"] = report.lines()
+        print(report_json(doc))
+        return 0 if report.ok else 1
     for line in report.lines():
         print(line)
     print("flight summary:")

@@ -22,6 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the simulation's random generator")
     parser.add_argument("--epoch", type=float, metavar="UNIX_S", help="UNIX time of t=0 in the .tlog (default: now)")
     parser.add_argument("--name", default="flight", help="log file stem (default flight)")
+    parser.add_argument("--json", action="store_true", help="print the flight report (as in OUT/summary.json) as JSON instead of text")
     parser.add_argument("--out", required=True, metavar="DIR", help="directory for NAME.tlog, NAME.csv, NAME.yaml")
 
 
@@ -51,9 +52,19 @@ def run(args: argparse.Namespace) -> int:
     )
     make_dir(args.out, "--out")
     result = simulate(args.config, spec, args.out)
-    print(f"pf-offboard sim: {result.reason} after {result.sim_time_s:.2f} s simulated"
-          + (" (CRASHED)" if result.crashed else ""))  # fmt: skip
+    if not args.json:
+        print(f"pf-offboard sim: {result.reason} after {result.sim_time_s:.2f} s simulated"
+              + (" (CRASHED)" if result.crashed else ""))  # fmt: skip
+    from pf_offboard.config import load_config
+    from pf_offboard.logs.summary import flight_report, report_json, write_report
+
+    code = 1 if result.crashed else 0
+    report = flight_report(result.summary, code, result.reason, result.paths.tlog.parent, load_config(args.config), "sim")
+    write_report(report, result.paths.tlog.parent)
+    if args.json:
+        print(report_json(report))
+        return code
     for line in result.summary.lines():
         print("  " + line)
     print(f"logs: {result.paths.tlog} {result.paths.steps_csv}")
-    return 1 if result.crashed else 0
+    return code

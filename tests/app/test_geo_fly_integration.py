@@ -5,6 +5,7 @@ path; against a vehicle elsewhere it refuses before sending any setpoint or comm
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -64,6 +65,11 @@ def test_geodetic_plan_flies_the_expected_local_path(tmp_path) -> None:
     flown = yaml.safe_load((tmp_path / "log" / "flight.yaml").read_text())["path"]
     assert "file" not in flown and flown["frame"] == "enu"
     assert np.max(np.linalg.norm(np.array(flown["waypoints"]) - EXPECTED_ENU_M, axis=1)) < 0.01
+    # the report beside the logs names the origin read from the vehicle
+    report = json.loads((tmp_path / "log" / "summary.json").read_text())
+    assert report["exit_code"] == 0 and report["summary"]["convergence_time_s"] == outcome.summary.convergence_time_s
+    origin = report["path_file"]["origin"]
+    assert (origin["lat_deg"], origin["lon_deg"], origin["alt_amsl_m"]) == pytest.approx(HOME, abs=1e-7)
     # the vehicle converged onto the expected local path and stayed on it
     active = [r for r in outcome.records if r.active]
     assert outcome.summary is not None and outcome.summary.convergence_time_s is not None
