@@ -147,7 +147,7 @@ def flight_report(summary: FlightSummary | None, exit_code: int, reason: str, lo
         "command": command,
         "exit_code": exit_code,
         "reason": reason,
-        "log_dir": str(log_dir) if log_dir is not None else None,
+        "log_dir": str(Path(log_dir).resolve()) if log_dir is not None else None,  # absolute: machines read it from anywhere
         "config": getattr(config, "source", None),
         "summary": summary.to_dict() if summary is not None else None,
     }
