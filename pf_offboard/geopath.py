@@ -50,6 +50,7 @@ _FRAME_REFERENCE = {
     MAV_FRAME_GLOBAL_RELATIVE_ALT: "relative_home",
     MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: "relative_home",
 }
+_COMMAND_NAMES = {20: "return to launch", 21: "land", 22: "take-off", 178: "speed change", 177: "jump", 206: "camera trigger distance"}
 _FRAME_NAMES = {10: "terrain-relative (MAV_FRAME_GLOBAL_TERRAIN_ALT)", 11: "terrain-relative (MAV_FRAME_GLOBAL_TERRAIN_ALT_INT)"}
 # Mission commands that are not a place to fly through: skipped and reported (DO_*, CONDITION_*),
 # and take-off / land / return (the app takes off itself with --takeoff and hands back at the end).
@@ -196,7 +197,7 @@ def parse_plan(text: str, source: str = "<plan>") -> GeoPath:
             raise PathFileError(source, where, f"command must be an integer, got {command!r}")
         if command != MAV_CMD_NAV_WAYPOINT:
             if command in _NON_POSITIONAL:
-                skipped.append(f"{where} (command {command})")
+                skipped.append(f"{where} ({_COMMAND_NAMES.get(command, f'command {command}')})")
                 continue
             raise PathFileError(source, where, f"mission command {command} is not a way-point (MAV_CMD_NAV_WAYPOINT, 16): "
                                 "remove take-off / land / loiter / return items, the app flies way-points only")  # fmt: skip
@@ -237,7 +238,7 @@ def parse_waypoints(text: str, source: str = "<waypoints>") -> GeoPath:
             continue  # home: where the vehicle was when the plan was made, not a place to fly through
         if command != MAV_CMD_NAV_WAYPOINT:
             if command in _NON_POSITIONAL:
-                skipped.append(f"{where} (command {command})")
+                skipped.append(f"{where} ({_COMMAND_NAMES.get(command, f'command {command}')})")
                 continue
             raise PathFileError(source, where, f"mission command {command} is not a way-point (MAV_CMD_NAV_WAYPOINT, 16)")
         refs.append((where, _frame_reference(frame, source, where)))

@@ -38,7 +38,7 @@ def test_plan_and_waypoints_skip_takeoff_speed_and_return_items() -> None:
     assert [s.split(" (")[0] for s in plan.skipped] == ["item 0", "item 1", "item 9"]
     assert plan.waypoints[0].where == "item 2"
     wpl = read_geopath(DATA / "mission.waypoints")
-    assert wpl.altitude_reference == "relative_home" and wpl.skipped == ("line 3 (command 22)",)
+    assert wpl.altitude_reference == "relative_home" and wpl.skipped == ("line 3 (take-off)",)
     assert len(wpl.waypoints) == 7  # home (index 0) is not a way-point
 
 
