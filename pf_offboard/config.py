@@ -94,6 +94,13 @@ class Config:
         """The path is in latitude / longitude and its local frame's origin is not known yet."""
         return self.path.geodetic is not None and not self.path.waypoints_enu_m
 
+    def require_local(self, hint: str = "") -> Config:
+        """This config, if its path is in the local frame; else a ConfigError naming path.origin."""
+        if self.needs_origin:
+            raise ConfigError("path.origin", "the path is in latitude/longitude (path.file) and no origin is known: add "
+                              "path.origin: [lat_deg, lon_deg, alt_amsl_m]" + (f" ({hint})" if hint else ""))  # fmt: skip
+        return self
+
 
 # ---------------------------------------------------------------------------------- helpers
 def _section(data: Any, name: str, allowed: tuple[str, ...], required: bool = False) -> Mapping[str, Any]:

@@ -79,5 +79,7 @@ def resolve_config(text: str | os.PathLike[str], flag: str = "--config") -> Path
         found = shipped_config(text)
         if found is not None:
             return found.path
+    if os.sep in text or "/" in text:
+        raise InputError(flag, f"no such file: {text}")
     names = ", ".join(c.name for c in shipped_configs())
-    raise InputError(flag, f"{text}: no such file, and not a shipped config (shipped: {names}; see pf-offboard configs)")
+    raise InputError(flag, f"no such file: {text}, and not a shipped config (shipped: {names}; see pf-offboard configs)")

@@ -27,7 +27,7 @@ def test_resolve_by_name_or_file(tmp_path, monkeypatch) -> None:
     assert resolve_config("paper.yaml") == resolve_config("paper")
     (tmp_path / "paper").write_text("path: {waypoints: [[0, 0, 1], [1, 0, 1]]}\n")
     assert resolve_config("paper") == Path("paper")  # an existing file wins over a shipped name
-    with pytest.raises(InputError, match=r"--config: nosuch: no such file, and not a shipped config \(shipped: figure8, helix, paper"):
+    with pytest.raises(InputError, match=r"--config: no such file: nosuch, and not a shipped config \(shipped: figure8, helix, paper"):
         resolve_config("nosuch")
     with pytest.raises(InputError, match="no such file"):
         resolve_config("dir/paper.yaml")  # a path is never looked up by name

@@ -92,7 +92,10 @@ def _reference_path(config_path: Path | None) -> NDArray[np.float64] | None:
         return None
     from pf_offboard.control import PathFollower  # the core; imported only when plotting a path
 
-    path = PathFollower.from_config(config_path).path
+    from pf_offboard.config import load_config
+
+    config = load_config(config_path).require_local("or plot with the flight.yaml beside the log: it holds the local way-points flown")
+    path = PathFollower.from_config(config).path
     lam = np.linspace(0.0, path.lam_max, 600)
     return np.array([path.eval(float(x)).sigma for x in lam])
 

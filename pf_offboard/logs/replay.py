@@ -364,7 +364,7 @@ def run(args: argparse.Namespace) -> int:
     config_path = Path(args.config) if args.config else FlightLogPaths.beside(args.log).config_yaml
     if not config_path.exists():
         raise InputError("--config", f"no such file: {config_path}" + ("" if args.config else " (pass --config)"))
-    config = load_config(config_path)
+    config = load_config(config_path).require_local("or replay with the flight.yaml beside the log: it holds the local way-points flown")
     options = ReplayOptions(
         autopilot=args.autopilot,
         output_mode=args.output,

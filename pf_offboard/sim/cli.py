@@ -55,14 +55,11 @@ def run(args: argparse.Namespace) -> int:
     if not args.json:
         print(f"pf-offboard sim: {result.reason} after {result.sim_time_s:.2f} s simulated"
               + (" (CRASHED)" if result.crashed else ""))  # fmt: skip
-    from pf_offboard.config import load_config
-    from pf_offboard.logs.summary import flight_report, report_json, write_report
-
     code = 1 if result.crashed else 0
-    report = flight_report(result.summary, code, result.reason, result.paths.tlog.parent, load_config(args.config), "sim")
-    write_report(report, result.paths.tlog.parent)
-    if args.json:
-        print(report_json(report))
+    if args.json:  # the report simulate() wrote beside the logs
+        from pf_offboard.logs.summary import SUMMARY_JSON
+
+        print((result.paths.tlog.parent / SUMMARY_JSON).read_text(encoding="utf-8"), end="")
         return code
     for line in result.summary.lines():
         print("  " + line)

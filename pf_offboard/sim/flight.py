@@ -168,9 +168,7 @@ class SimFlight:
         self.spec = spec
         self.config_path = Path(config_path)
         config = load_config(self.config_path)
-        if config.needs_origin:
-            raise InputError("path.origin", "the path is in latitude/longitude (path.file) and sim has no vehicle to read "
-                             "the origin from: add path.origin: [lat_deg, lon_deg, alt_amsl_m]")  # fmt: skip
+        config.require_local("sim has no vehicle to read the origin from")
         self.config = config
         settings = flight_settings(config, argparse.Namespace(output=spec.output_mode, end_action=None))
         self.settings = settings
@@ -347,10 +345,15 @@ class SimFlight:
             else:
                 self.reason = f"time limit {limit_s:.0f} s reached before {spec.laps:g} laps"
             paths = log.paths
+        summary = summarize(self.records)
+        from pf_offboard.logs.summary import flight_report, write_report
+
+        crashed = bool(self.autopilot.truth.crashed)
+        write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim"), paths.tlog.parent)
         return SimResult(
             paths=paths,
             records=self.records,
-            summary=summarize(self.records),
+            summary=summary,
             reason=self.reason,
             activation_time_s=self.activation_time_s,
             crashed=bool(self.autopilot.truth.crashed),
