@@ -223,7 +223,8 @@ def parse_waypoints(text: str, source: str = "<waypoints>") -> GeoPath:
         where = f"line {n}"
         if not line.strip():
             continue
-        fields = line.split("\t") if "\t" in line else line.split()
+        stripped = line.strip()  # trailing tabs / blanks some tools write
+        fields = stripped.split("\t") if "\t" in stripped else stripped.split()
         if len(fields) != 12:
             raise PathFileError(source, where, f"expected 12 fields (INDEX CURRENT FRAME COMMAND P1..P4 LAT LON ALT AUTOCONTINUE), got {len(fields)}")
         try:

@@ -42,6 +42,12 @@ def test_plan_and_waypoints_skip_takeoff_speed_and_return_items() -> None:
     assert len(wpl.waypoints) == 7  # home (index 0) is not a way-point
 
 
+def test_waypoints_with_crlf_and_trailing_tabs(tmp_path) -> None:
+    p = tmp_path / "m.waypoints"
+    p.write_bytes((DATA / "mission.waypoints").read_text().replace("\n", "\t\r\n").encode())
+    assert read_geopath(p).lat_lon_alt().tolist() == read_geopath(DATA / "mission.waypoints").lat_lon_alt().tolist()
+
+
 def test_relative_home_uses_the_home_altitude_not_the_origin() -> None:
     geo = read_geopath(DATA / "mission.csv")
     a = to_local(geo, "relative_home", HOME)
