@@ -24,6 +24,8 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("identify", "pf_offboard.identify.cli", "fit the vehicle's inner-loop response (vehicle: section) from logs or a short excitation"),
     ("plot", "pf_offboard.logs.plot", "paper-style figures (Figs. 4-9) from flight logs"),
     ("bench", "pf_offboard.bench", "benchmarks: controller cost, simulation speed, MAVLink latency"),
+    ("configs", "pf_offboard.app.configs_cmd", "list the shipped configs (use a name with --config)"),
+    ("init", "pf_offboard.app.init_cmd", "write an editable copy of a shipped config"),
 )
 
 

@@ -22,6 +22,7 @@ from pf_offboard.frames import ned_to_enu, yaw_ned_to_enu, yaw_rate_ned_to_enu
 from pf_offboard.safety.envelope import ACTIONS as SAFETY_ACTIONS
 from pf_offboard.safety.envelope import SHAPES as FENCE_SHAPES
 from pf_offboard.safety.envelope import SafetyConfig
+from pf_offboard.geo import GeoPoint
 
 MAX_SPEED_M_S = 20.0
 OUTPUT_MODES = ("acceleration", "attitude", "rates")
@@ -31,13 +32,40 @@ MOVING_FRAMES = ("auto", "frenet", "rmf")
 
 
 @dataclass(frozen=True)
+class GeodeticSource:
+    """A path given in latitude / longitude / altitude (``path.file``), before or after its
+    conversion to the local frame.
+
+    ``file``: the way-point file as resolved (relative to the config's directory);
+    ``waypoints_lat_lon_alt``: (lat_deg, lon_deg, alt_m) as in the file, ``altitude_reference``
+    (``relative_home`` | ``amsl``) saying what alt_m is measured from; ``names``: item / line of
+    each way-point in the file; ``origin``: the local frame's origin (WGS-84, AMSL) when known
+    (``path.origin`` in the config, or read from the vehicle at connect time); ``skipped``: file
+    items that are not way-points (take-off, speed changes, ...).
+    """
+
+    file: str
+    file_format: str
+    altitude_reference: str
+    waypoints_lat_lon_alt: tuple[tuple[float, float, float], ...]
+    names: tuple[str, ...]
+    origin: GeoPoint | None = None
+    home_alt_amsl_m: float | None = None  # relative_home: home's altitude (default: the origin's)
+    skipped: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class PathConfig:
-    """``frame``: frame the way-points were written in; ``waypoints_enu_m`` are always ENU (m)."""
+    """``frame``: frame the way-points were written in; ``waypoints_enu_m`` are always ENU (m).
+
+    A path from a planning tool (``geodetic`` set) has no local way-points until its origin is
+    known: ``waypoints_enu_m`` is then empty and :func:`with_origin` fills it in."""
 
     waypoints_enu_m: tuple[tuple[float, float, float], ...]
     closed: bool = False
     frame: str = "enu"
     moving_frame: str = "auto"
+    geodetic: GeodeticSource | None = None
 
 
 @dataclass(frozen=True)
@@ -80,6 +108,18 @@ class Config:
     gains_auto: bool = False  # gains derived from the vehicle model (gains: auto or no gains section)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     source: str = "<config>"
+
+    @property
+    def needs_origin(self) -> bool:
+        """The path is in latitude / longitude and its local frame's origin is not known yet."""
+        return self.path.geodetic is not None and not self.path.waypoints_enu_m
+
+    def require_local(self, hint: str = "") -> Config:
+        """This config, if its path is in the local frame; else a ConfigError naming path.origin."""
+        if self.needs_origin:
+            raise ConfigError("path.origin", "the path is in latitude/longitude (path.file) and no origin is known: add "
+                              "path.origin: [lat_deg, lon_deg, alt_amsl_m]" + (f" ({hint})" if hint else ""))  # fmt: skip
+        return self
 
 
 # ---------------------------------------------------------------------------------- helpers
@@ -186,17 +226,7 @@ def _pairs(value: Any, name: str, width: int) -> list[list[float]]:
 
 
 # ---------------------------------------------------------------------------------- sections
-def _path(data: Any) -> PathConfig:
-    d = _section(data, "path", ("frame", "closed", "moving_frame", "waypoints"), required=True)
-    frame = _choice(d, "frame", "path.frame", "enu", FRAMES)
-    closed = _bool(d, "closed", "path.closed", False)
-    moving = _choice(d, "moving_frame", "path.moving_frame", "auto", MOVING_FRAMES)
-    if "waypoints" not in d:
-        raise ConfigError("path.waypoints", "missing (required)")
-    pts = _pairs(d["waypoints"], "path.waypoints", 3)
-    if frame == "ned":
-        pts = [ned_to_enu(p).tolist() for p in pts]
-    waypoints = tuple((p[0], p[1], p[2]) for p in pts)
+def _build_path(waypoints: tuple[tuple[float, float, float], ...], closed: bool, moving: str) -> None:
     # Build the path once so that every geometric problem (duplicates, too few points, a spline
     # that doubles back, frenet on a straight piece) is reported at load time, named in config terms.
     from pf_offboard.path import Path
@@ -206,7 +236,106 @@ def _path(data: Any) -> PathConfig:
     except InputError as exc:
         fld = exc.field if exc.field.startswith("path.") else f"path.{exc.field}"
         raise ConfigError(fld, exc.reason) from None
+
+
+def _path(data: Any, base_dir: str | None = None) -> PathConfig:
+    d = _section(data, "path", ("frame", "closed", "moving_frame", "waypoints", "file", "altitude_reference", "origin"), required=True)
+    closed = _bool(d, "closed", "path.closed", False)
+    moving = _choice(d, "moving_frame", "path.moving_frame", "auto", MOVING_FRAMES)
+    if "file" in d:
+        return _geodetic_path(d, closed, moving, base_dir)
+    for key in ("altitude_reference", "origin"):
+        if key in d:
+            raise ConfigError(f"path.{key}", "only applies to a path from a file (path.file: mission.plan | .waypoints | .csv | .geojson | .kml)")
+    frame = _choice(d, "frame", "path.frame", "enu", FRAMES)
+    if "waypoints" not in d:
+        raise ConfigError("path.waypoints", "missing (required; or path.file: a way-point file from a planning tool)")
+    pts = _pairs(d["waypoints"], "path.waypoints", 3)
+    if frame == "ned":
+        pts = [ned_to_enu(p).tolist() for p in pts]
+    waypoints = tuple((p[0], p[1], p[2]) for p in pts)
+    _build_path(waypoints, closed, moving)
     return PathConfig(waypoints, closed, frame, moving)
+
+
+def _geodetic_path(d: Mapping[str, Any], closed: bool, moving: str, base_dir: str | None) -> PathConfig:
+    """``path.file`` (+ ``altitude_reference``, optional ``origin``): way-points in latitude /
+    longitude from a planning tool; converted now if the origin is given, else at connect time."""
+    from pf_offboard.geopath import ALTITUDE_REFERENCES, read_geopath
+
+    for key in ("waypoints", "frame"):
+        if key in d:
+            raise ConfigError(f"path.{key}", "cannot be combined with path.file (the way-points come from the file)")
+    name = d["file"]
+    if not isinstance(name, str) or not name.strip():
+        raise ConfigError("path.file", f"must be a file name, got {name!r}")
+    if "altitude_reference" not in d:
+        raise ConfigError("path.altitude_reference", "missing (required with path.file): relative_home (altitudes above "
+                          "the home position) or amsl (above mean sea level)")  # fmt: skip
+    reference = _choice(d, "altitude_reference", "path.altitude_reference", "", ALTITUDE_REFERENCES)
+    file_path = os.path.join(base_dir, name) if base_dir and not os.path.isabs(name) else name
+    geo = read_geopath(file_path)  # PathFileError names the file and the item
+    if geo.altitude_reference is not None and geo.altitude_reference != reference:
+        raise ConfigError("path.altitude_reference", f"is {reference}, but {file_path} gives its altitudes as {geo.altitude_reference}; make them agree")
+    origin: GeoPoint | None = None
+    if "origin" in d:
+        o = d["origin"]
+        if not isinstance(o, (list, tuple)) or len(o) != 3:
+            raise ConfigError("path.origin", f"must be [lat_deg, lon_deg, alt_amsl_m], got {o!r}")
+        try:
+            origin = GeoPoint(*o)
+        except InputError as exc:
+            raise ConfigError("path.origin", exc.reason) from None
+    source = GeodeticSource(
+        file=file_path,
+        file_format=geo.file_format,
+        altitude_reference=reference,
+        waypoints_lat_lon_alt=tuple((w.lat_deg, w.lon_deg, w.alt_m) for w in geo.waypoints),
+        names=tuple(w.where for w in geo.waypoints),
+        skipped=geo.skipped,
+    )
+    path = PathConfig((), closed, "enu", moving, source)
+    return _localise(path, origin, None) if origin is not None else path
+
+
+def _localise(path: PathConfig, origin: GeoPoint, home_alt_amsl_m: float | None) -> PathConfig:
+    from pf_offboard.geopath import GeoPath, GeoWaypoint, to_local
+
+    src = path.geodetic
+    assert src is not None
+    geo = GeoPath(src.file, src.file_format, tuple(GeoWaypoint(*p, n) for p, n in zip(src.waypoints_lat_lon_alt, src.names)), None)
+    local = to_local(geo, src.altitude_reference, origin, home_alt_amsl_m)
+    waypoints = tuple((float(p[0]), float(p[1]), float(p[2])) for p in local)
+    _build_path(waypoints, path.closed, path.moving_frame)
+    from dataclasses import replace
+
+    return replace(path, waypoints_enu_m=waypoints, geodetic=replace(src, origin=origin, home_alt_amsl_m=home_alt_amsl_m))
+
+
+def with_origin(config: Config, origin: GeoPoint, home_alt_amsl_m: float | None = None) -> Config:
+    """``config`` with its geodetic path converted to the local ENU frame of ``origin`` (the
+    vehicle's EKF origin, AMSL). ``home_alt_amsl_m``: the home position's altitude for
+    ``altitude_reference: relative_home`` (default: the origin's). Refuses way-points farther
+    than :data:`pf_offboard.geopath.MAX_DISTANCE_FROM_ORIGIN_M` from the origin."""
+    from dataclasses import replace
+
+    if config.path.geodetic is None:
+        return config
+    return replace(config, path=_localise(config.path, origin, home_alt_amsl_m))
+
+
+def local_config_data(config: Config, data: Mapping[str, Any]) -> dict[str, Any]:
+    """The YAML mapping ``data`` of ``config`` with its geodetic path replaced by the local ENU
+    way-points it was converted to (a self-contained copy for the flight's logs: replay and plot
+    rebuild exactly the path that was flown)."""
+    out = dict(data)
+    path = dict(out.get("path") or {})
+    for key in ("file", "altitude_reference", "origin"):
+        path.pop(key, None)
+    path["frame"] = "enu"
+    path["waypoints"] = [list(p) for p in config.path.waypoints_enu_m]
+    out["path"] = path
+    return out
 
 
 def _gains(data: Any) -> Gains:
@@ -390,14 +519,16 @@ TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle",
 
 
 def parse_config(data: Any, source: str = "<config>") -> Config:
-    """Validate a parsed YAML mapping into a :class:`Config` (ENU)."""
+    """Validate a parsed YAML mapping into a :class:`Config` (ENU). A ``path.file`` is read
+    relative to the directory of ``source`` (when ``source`` is a file)."""
     if data is not None and not isinstance(data, Mapping):
         # Name the file: "<top level>" alone does not say which config was wrong.
         raise ConfigError(source, f"must be a mapping of sections ({', '.join(TOP_LEVEL)}), got {type(data).__name__}")
     d = _section(data, "", TOP_LEVEL, required=True) if data is not None else None
     if d is None:
         raise ConfigError("path", "missing (required section); the config is empty")
-    path = _path(d.get("path"))
+    base_dir = os.path.dirname(source) if os.path.isfile(source) else None
+    path = _path(d.get("path"), base_dir)
     speed = _number(d, "speed_m_s", "speed_m_s", 1.0, -MAX_SPEED_M_S, MAX_SPEED_M_S)
     assert speed is not None
     if abs(speed) < MIN_SPEED_M_S:

@@ -477,7 +477,11 @@ class Autopilot:
             return ACCEPTED, [(link, mavlink.MAVLink_message_interval_message(int(p[0]), us))]
         if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
             built = self.build(int(p[0]))
-            return (ACCEPTED, [(link, built)]) if built is not None else (UNSUPPORTED, [])
+            if built is not None:
+                return ACCEPTED, [(link, built)]
+            # a message we know but cannot send yet (HOME_POSITION / GPS_GLOBAL_ORIGIN before the
+            # EKF has a position): FAILED, as the autopilots answer; an unknown one: UNSUPPORTED
+            return (mavlink.MAV_RESULT_FAILED if int(p[0]) in telemetry.BUILDERS else UNSUPPORTED), []
         if command == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return ACCEPTED, [(link, telemetry.autopilot_version(self))]
         if command == mavlink.MAV_CMD_GET_HOME_POSITION:

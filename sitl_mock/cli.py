@@ -87,6 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="position estimate ready after S simulated seconds (default 0.5)")
     p.add_argument("--spawn", default="ground",
                    help="ground | hover:x,y,z | throw:x,y,z,vx,vy,vz — NED metres and m/s (z = -altitude)")
+    p.add_argument("--home", metavar="LAT,LON,ALT",
+                   help="home = EKF origin: WGS-84 degrees and metres AMSL (default 47.397742,8.545594,488, PX4 SITL's); "
+                   "sent as HOME_POSITION and GPS_GLOBAL_ORIGIN; south / west: --home=-35.363261,149.16523,584")
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw (faults, wind turbulence)")
     f = p.add_argument_group("fault injection (times in simulated seconds)")
     f.add_argument("--loss", type=float, default=0.0, metavar="PCT", help="drop this %% of datagrams (both directions)")
@@ -192,7 +195,14 @@ def config_from_args(args: argparse.Namespace) -> MockConfig:
     except MockConfigError as exc:  # name the flag, not the field
         flag = "--wind" if exc.field == "wind_ned_m_s" else "--wind-gusts"
         raise MockConfigError(flag, exc.reason) from None
+    home: dict[str, float] = {}
+    if args.home:
+        lat, lon, alt = _floats(args.home, 3, "--home")
+        if not (abs(lat) <= 90.0 and abs(lon) <= 180.0 and -1000.0 <= alt <= 10000.0):
+            raise MockConfigError("--home", f"need LAT in [-90, 90] deg, LON in [-180, 180] deg, ALT in [-1000, 10000] m AMSL, got {args.home!r}")
+        home = {"home_lat_deg": lat, "home_lon_deg": lon, "home_alt_m": alt}
     config = MockConfig(
+        **home,  # type: ignore[arg-type]
         profile=args.profile,
         vehicle=args.vehicle,
         spawn=SpawnSpec.parse(args.spawn),
@@ -218,7 +228,8 @@ def config_to_args(config: MockConfig) -> list[str]:
     """The flags that reproduce ``config`` (used to run the mock in a subprocess)."""
     c, f = config, config.faults
     args = ["--profile", c.profile, "--vehicle", c.vehicle, "--seed", str(c.seed),
-            "--ekf-delay", repr(c.ekf_ready_delay_s)]
+            "--ekf-delay", repr(c.ekf_ready_delay_s),
+            "--home=" + ",".join(repr(v) for v in (c.home_lat_deg, c.home_lon_deg, c.home_alt_m))]  # "=": a south latitude starts with "-"
     if any(v != 0.0 for v in c.wind_ned_m_s):
         args += ["--wind", ",".join(repr(float(v)) for v in c.wind_ned_m_s)]
     if c.wind_gust_std_m_s > 0.0:

@@ -153,6 +153,7 @@ PX4_STREAMS: tuple[tuple[int, float], ...] = (
     (_M.MAVLINK_MSG_ID_SYS_STATUS, 5.0),
     (_M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 5.0),
     (_M.MAVLINK_MSG_ID_HOME_POSITION, 0.5),
+    (_M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, 0.1),  # PX4's mavlink_main.cpp streams it at 0.1 Hz
 )
 # ArduPilot SITL streams only HEARTBEAT until the client asks (SR*_ rates are 0 on the SITL link
 # a client opens on 5760 before it requests streams).

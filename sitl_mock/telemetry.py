@@ -173,6 +173,12 @@ def home_position(ap: Autopilot) -> mavlink.MAVLink_message:
     )
 
 
+def gps_global_origin(ap: Autopilot) -> mavlink.MAVLink_message:
+    """The EKF origin (the local frame's (0, 0, 0)): the mock's home, lat/lon 1e7 deg, alt mm AMSL."""
+    lat, lon, alt = ned_to_global(ap, np.zeros(3))
+    return mavlink.MAVLink_gps_global_origin_message(lat, lon, alt, _time_usec(ap))
+
+
 def highres_imu(ap: Autopilot) -> mavlink.MAVLink_message:
     s = ap.truth
     f = s.specific_force_frd_m_s2
@@ -238,6 +244,7 @@ BUILDERS: Mapping[int, Callable[..., object]] = MappingProxyType({
     mavlink.MAVLINK_MSG_ID_ODOMETRY: odometry,
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: global_position_int,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: gps_global_origin,
     mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: highres_imu,
     mavlink.MAVLINK_MSG_ID_ALTITUDE: altitude,
     mavlink.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
@@ -252,5 +259,6 @@ NEEDS_POSITION = frozenset(
         mavlink.MAVLINK_MSG_ID_ODOMETRY,
         mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
         mavlink.MAVLINK_MSG_ID_HOME_POSITION,
+        mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,  # no origin before the EKF has a position
     }
 )

@@ -9,7 +9,6 @@ hand-back in AUTO.LOITER. Prints the flight summary, writes the logs and the pap
 from __future__ import annotations
 
 import argparse
-import importlib.resources
 import sys
 from pathlib import Path
 from typing import Any
@@ -21,7 +20,7 @@ START_ENU_M = (0.0, -1.5, 2.0)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", help="config YAML (default: the paper's configs/paper.yaml)")
+    parser.add_argument("--config", help="config YAML file or shipped config name (default: paper)")
     parser.add_argument("--laps", type=float, default=2.0, help="laps to fly (default 2)")
     parser.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: from the config)")
     parser.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4", help="mock profile (default px4)")
@@ -30,20 +29,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--signing-key", metavar="FILE",
                         help="MAVLink 2 signing on both ends (the mock and the app) with this key file")  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no status line")
+    parser.add_argument("--json", action="store_true", help="print the flight report (LOG_DIR/summary.json) as JSON on stdout")
 
 
 def paper_config() -> Path:
-    """configs/paper.yaml: beside the package (source tree), in the working directory (the
-    README's ``pip install . && pf-offboard demo`` runs in the repository), or packaged."""
-    candidates = [Path(__file__).resolve().parents[2] / "configs" / "paper.yaml", Path.cwd() / "configs" / "paper.yaml"]
-    for candidate in candidates:
-        if candidate.is_file():
-            return candidate
-    packaged = importlib.resources.files("pf_offboard.app") / "data" / "paper.yaml"
-    if packaged.is_file():
-        with importlib.resources.as_file(packaged) as p:
-            return Path(p)
-    raise InputError("--config", "configs/paper.yaml not found (run from the repository or pass --config)")
+    """The shipped ``paper`` config (package data: found after ``pip install`` from any directory)."""
+    from pf_offboard.shipped import resolve_config
+
+    return resolve_config("paper")
 
 
 # The mock's default ("fast") vehicle: its closed body-rate loop reaches 63 % of a step within
@@ -79,7 +72,9 @@ def run(args: argparse.Namespace) -> int:
     from pf_offboard.app.fly import default_log_dir, fly
     from pf_offboard.config import load_config
 
-    config_path = Path(args.config) if args.config else paper_config()
+    from pf_offboard.shipped import resolve_config
+
+    config_path = resolve_config(args.config) if args.config else paper_config()
     if not (args.laps > 0):
         raise InputError("--laps", f"must be > 0, got {args.laps}")
     stamped = default_log_dir()
@@ -129,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
             flags.append("--quiet")
         if args.signing_key:
             flags += ["--signing-key", args.signing_key]
+        if args.json:
+            flags.append("--json")
         outcome = fly(parser.parse_args(flags))
     if outcome.exit_code == 0 and outcome.log_dir is not None and not args.no_plots:
         try:

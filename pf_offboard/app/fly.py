@@ -34,7 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--connect", required=True, metavar="ENDPOINT",
                         help="udpin:HOST:PORT | udpout:HOST:PORT | tcp:HOST:PORT | serial:DEVICE:BAUD "
                              "(PX4 SITL: udpin:0.0.0.0:14540; ArduPilot SITL: tcp:127.0.0.1:5760)")  # fmt: skip
-    parser.add_argument("--config", required=True, metavar="YAML", help="path, speed, gains, limits and flight: settings")
+    parser.add_argument("--config", required=True, metavar="YAML", help="config file, or a shipped config's name (pf-offboard configs)")
     launch = parser.add_mutually_exclusive_group(required=True)
     launch.add_argument("--takeoff", type=float, nargs="?", const=FROM_CONFIG, metavar="H",
                         help="arm, take off to H metres (default flight.takeoff_altitude_m), then follow")  # fmt: skip
@@ -64,6 +64,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="--takeoff: give up if the take-off altitude is not held within S seconds (default 30 + 5 s per metre)")  # fmt: skip
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/<UTC timestamp>/")
     parser.add_argument("--quiet", action="store_true", help="no status line")
+    parser.add_argument("--json", action="store_true", help="print the flight report (as in LOG_DIR/summary.json) as JSON on stdout")
 
 
 @dataclass(frozen=True)
@@ -236,13 +237,18 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None, on_start:
     from pf_offboard.app.link import parse_endpoint
     from pf_offboard.config import load_config
 
+    from pf_offboard.shipped import resolve_config
+
     endpoint = parse_endpoint(args.connect)  # InputError before anything is opened
     signing_key = signing_key_from_args(args)
+    args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     config = load_config(args.config)
     _heights_from_config(args, config)
     _check_args(args)
     settings = flight_settings(config, args)
-    fence = envelope_fence(config)  # a path outside the fence is bad input: refused before any traffic
+    # a path outside the fence is bad input: refused before any traffic (a lat/lon path: once it
+    # is in the local frame, after connecting but still before any setpoint or command)
+    fence = envelope_fence(config) if config.path.geodetic is None else None
     if args.log_dir:
         from pf_offboard.logs._io import make_dir
 
@@ -272,7 +278,8 @@ async def _fly(
     from pf_offboard.logs.summary import SummaryAccumulator
     from pf_offboard.safety import EnvelopeMonitor, SafetyConfig
 
-    follower = PathFollower.from_config(config)
+    # a path in latitude / longitude is built once the vehicle's origin is known (below)
+    follower = PathFollower.from_config(config) if config.path.geodetic is None else None
     link = Link.open(endpoint, signing_key=signing_key)
     # state that waited in the socket longer than the state timeout is never flown
     link.max_state_age_s = settings.state_timeout_s
@@ -296,6 +303,15 @@ async def _fly(
         flight_log = log
         link.on_received = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
         link.on_sent = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
+        if config.path.geodetic is not None:
+            # a path in latitude / longitude: into the vehicle's local frame (its EKF origin), refused
+            # if out of bounds, before any setpoint or command; the log keeps the local way-points
+            from pf_offboard.app.origin import localise_config
+
+            config = await localise_config(link, config, stream)
+            flight_log.write_config(args.config, config)
+            follower = PathFollower.from_config(config)
+        assert follower is not None
 
         launch = "takeoff" if args.takeoff is not None else "throw" if args.throw is not None else "airborne"
         height = args.takeoff if args.takeoff is not None else args.throw if args.throw is not None else math.nan
@@ -390,10 +406,21 @@ async def _fly(
     assert log is not None
     summary = summary_acc.result() if summary_acc.steps else None
     _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
+    _write_summary_json(args, result.exit_code, result.reason, summary, log.paths.tlog.parent, config)
     return FlyOutcome(
         result.exit_code, result.reason, log.paths.tlog.parent, summary, result.activation_time_s, result.breach,
         result.breach_time_s, link.counters, pipeline.estimator,
     )  # fmt: skip
+
+
+def _write_summary_json(args: argparse.Namespace, code: int, reason: str, summary: Any, log_dir: Path, config: Any) -> None:
+    """``LOG_DIR/summary.json`` always; with ``--json`` the same report on stdout."""
+    from pf_offboard.logs.summary import flight_report, report_json, write_report
+
+    report = flight_report(summary, code, reason, log_dir, config)
+    write_report(report, log_dir)
+    if getattr(args, "json", False):
+        print(report_json(report))
 
 
 def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[type-arg]

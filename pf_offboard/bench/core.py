@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-PAPER_YAML = FsPath(__file__).resolve().parents[2] / "configs" / "paper.yaml"
+PAPER_YAML = FsPath(__file__).resolve().parents[1] / "configs" / "paper.yaml"  # package data
 START_ENU_M = (0.0, -1.5, 4.0)  # 2 m above the paper's PF1 start (0, -1.5, 2), at rest
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from pf_offboard.logs._io import Closing
 from pf_offboard.logs.steplog import StepLogWriter, StepRecord
@@ -61,13 +62,41 @@ class FlightLog(Closing):
         self._steps = steps
 
     @classmethod
-    def open(cls, out_dir: str | Path, name: str = "flight", config_path: str | Path | None = None) -> FlightLog:
-        """Create the directory and files (overwriting a previous flight of the same name)."""
+    def open(cls, out_dir: str | Path, name: str = "flight", config_path: str | Path | None = None, config: Any = None) -> FlightLog:
+        """Create the directory and files (overwriting a previous flight of the same name).
+
+        ``config``: the loaded config; when its path came from a planning tool's file and was
+        converted to local way-points, the copy holds those (see :meth:`write_config`)."""
         paths = FlightLogPaths.in_dir(out_dir, name)
         paths.tlog.parent.mkdir(parents=True, exist_ok=True)
-        if config_path is not None and Path(config_path).resolve() != paths.config_yaml.resolve():
-            shutil.copyfile(config_path, paths.config_yaml)
-        return cls(paths, TlogWriter.open(paths.tlog), StepLogWriter.open(paths.steps_csv))
+        log = cls(paths, TlogWriter.open(paths.tlog), StepLogWriter.open(paths.steps_csv))
+        if config_path is not None:
+            log.write_config(config_path, config)
+        return log
+
+    def write_config(self, config_path: str | Path, config: Any = None) -> None:
+        """Copy the config flown beside the logs. A geodetic path (``path.file``) already converted
+        to the local frame is written as its local ENU way-points, with the file, origin and
+        altitude reference in a comment: replay and plot then rebuild exactly the path flown."""
+        target = self.paths.config_yaml
+        geodetic = getattr(getattr(config, "path", None), "geodetic", None)
+        if geodetic is None or not config.path.waypoints_enu_m:
+            if Path(config_path).resolve() != target.resolve():
+                shutil.copyfile(config_path, target)
+            return
+        import yaml
+
+        from pf_offboard.config import local_config_data
+
+        data = yaml.safe_load(Path(config_path).read_text(encoding="utf-8"))
+        o = geodetic.origin
+        header = (
+            f"# Flown from {config_path}: path.file {geodetic.file} ({geodetic.file_format}, altitudes {geodetic.altitude_reference}),\n"
+            f"# converted to local ENU metres at the origin lat {o.lat_deg!r} deg, lon {o.lon_deg!r} deg, alt {o.alt_amsl_m!r} m AMSL"
+            + (f" (home at {geodetic.home_alt_amsl_m!r} m AMSL)" if geodetic.home_alt_amsl_m is not None else "")
+            + ".\n"
+        )
+        target.write_text(header + yaml.safe_dump(local_config_data(config, data), sort_keys=False), encoding="utf-8")
 
     def frame(self, frame_bytes: bytes | bytearray, unix_time_s: float) -> None:
         self._tlog.write(frame_bytes, unix_time_s)

@@ -3,6 +3,8 @@
 - ``path3d.png`` — the reference path and every run's output trajectory with its start point
   (Figs. 4 and 7): the legend gives each run's start position, or its speed at activation for
   a thrown start;
+- ``map.png`` — top view in the map frame (x east, y north, equal scale): reference path,
+  tracks, the local origin and the geofence of the config's ``safety:`` section when it has one;
 - ``<run>_tangential.png`` — η1 (arclength, m) and η2 (speed along the path, m/s) against time
   with η2_ref (Figs. 5 and 8);
 - ``<run>_transversal.png`` — ξ1, φ1 (m) and ξ2, φ2 (m/s) against time (Figs. 6 and 9).
@@ -90,7 +92,10 @@ def _reference_path(config_path: Path | None) -> NDArray[np.float64] | None:
         return None
     from pf_offboard.control import PathFollower  # the core; imported only when plotting a path
 
-    path = PathFollower.from_config(config_path).path
+    from pf_offboard.config import load_config
+
+    config = load_config(config_path).require_local("or plot with the flight.yaml beside the log: it holds the local way-points flown")
+    path = PathFollower.from_config(config).path
     lam = np.linspace(0.0, path.lam_max, 600)
     return np.array([path.eval(float(x)).sigma for x in lam])
 
@@ -143,6 +148,96 @@ def plot_path3d(runs: Sequence[Run], reference: NDArray[np.float64] | None, out:
     ax.set_zlabel("z up [m]")
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(out, dpi=_DPI)
+    plt.close(fig)
+    return out
+
+
+@dataclass(frozen=True)
+class Fence:
+    """A geofence in the local ENU frame (m): a box (``min_enu_m`` / ``max_enu_m``) or a vertical
+    cylinder (``center_enu_m`` (x, y), ``radius_m``), as in the config's ``safety:`` section."""
+
+    min_enu_m: tuple[float, float, float] | None = None
+    max_enu_m: tuple[float, float, float] | None = None
+    center_enu_m: tuple[float, float] | None = None
+    radius_m: float | None = None
+
+
+def fence_from_config(config_path: Path | None) -> Fence | None:
+    """The ``safety:`` fence of a config file (``fence_min_enu_m`` + ``fence_max_enu_m``, or
+    ``fence_center_enu_m`` + ``fence_radius_m``), or None when it has none (read from the YAML, so
+    a log's config copy draws the fence it was flown with)."""
+    if config_path is None or not Path(config_path).is_file():
+        return None
+    import yaml
+
+    try:
+        data = yaml.safe_load(Path(config_path).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError):
+        return None
+    safety = data.get("safety") if isinstance(data, dict) else None
+    if not isinstance(safety, dict):
+        return None
+
+    def vec(name: str, n: int) -> tuple[float, ...] | None:
+        v = safety.get(name)
+        if isinstance(v, (list, tuple)) and len(v) == n and all(isinstance(x, (int, float)) for x in v):
+            return tuple(float(x) for x in v)
+        return None
+
+    lo, hi = vec("fence_min_enu_m", 3), vec("fence_max_enu_m", 3)
+    center, radius = vec("fence_center_enu_m", 2), safety.get("fence_radius_m")
+    if lo is not None and hi is not None:
+        return Fence(min_enu_m=lo, max_enu_m=hi)  # type: ignore[arg-type]
+    if center is not None and isinstance(radius, (int, float)):
+        return Fence(center_enu_m=center, radius_m=float(radius))  # type: ignore[arg-type]
+    return None
+
+
+def _origin_note(log_dir: Path) -> str:
+    """``origin lat .. lon ..`` from the flight's summary.json when its path came from lat/lon."""
+    import json
+
+    try:
+        report = json.loads((log_dir / "summary.json").read_text(encoding="utf-8"))
+        o = report["path_file"]["origin"]
+        return f"; origin {o['lat_deg']:.7f}, {o['lon_deg']:.7f}, {o['alt_amsl_m']:.1f} m AMSL"
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+
+
+def plot_map(runs: Sequence[Run], reference: NDArray[np.float64] | None, fence: Fence | None, out: Path, note: str = "") -> Path:
+    """Top view in the map frame (x east, y north, metres; equal scale): the reference path,
+    every run's track with its start (o) and activation (x), the local origin (+) and the fence."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle, Rectangle
+
+    fig, ax = plt.subplots(figsize=(6.4, 6.0))
+    if fence is not None and fence.min_enu_m is not None and fence.max_enu_m is not None:
+        (x0, y0, _), (x1, y1, _) = fence.min_enu_m, fence.max_enu_m
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ec="C3", lw=1.5, ls="-",
+                               label=f"geofence {x1 - x0:g} x {y1 - y0:g} m"))  # fmt: skip
+    elif fence is not None and fence.center_enu_m is not None and fence.radius_m is not None:
+        ax.add_patch(Circle(fence.center_enu_m, fence.radius_m, fill=False, ec="C3", lw=1.5, label=f"geofence r = {fence.radius_m:g} m"))
+    if reference is not None:
+        ax.plot(reference[:, 0], reference[:, 1], color="k", ls="--", lw=1.3, label="reference path")
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, run in enumerate(runs):
+        c = colors[k % len(colors)]
+        p = run.col("position_enu_m")
+        ax.plot(p[:, 0], p[:, 1], color=c, lw=1.1, label=run.name)
+        ax.plot(p[0, 0], p[0, 1], "o", color=c, ms=5)
+        if run.first_active > 0:
+            ax.plot(p[run.first_active, 0], p[run.first_active, 1], "x", color=c, ms=7)
+    ax.plot(0.0, 0.0, "+", color="0.3", ms=10, mew=1.5, label="origin (0, 0)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x east [m]")
+    ax.set_ylabel("y north [m]")
+    ax.set_title("Top view, local ENU frame" + note, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     fig.savefig(out, dpi=_DPI)
     plt.close(fig)
@@ -241,6 +336,8 @@ def make_figures(
     ref_speed = runs[0].records[runs[0].first_active].speed_ref_m_s
     default_title = "Path following, " + r"$\eta_2^{ref}$" + (f" = {ref_speed:.2f} m/s" if math.isfinite(ref_speed) else "")
     pngs = [plot_path3d(runs, reference, out / "path3d.png", title or default_title)]
+    fence = fence_from_config(cfg if cfg.exists() else None)
+    pngs.append(plot_map(runs, reference, fence, out / "map.png", _origin_note(Path(logs[0]).parent)))
     for run in runs:
         pngs.append(plot_tangential(run, out / f"{run.name}_tangential.png"))
         pngs.append(plot_transversal(run, out / f"{run.name}_transversal.png"))

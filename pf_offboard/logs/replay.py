@@ -346,6 +346,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--state-source", choices=("local_position", "odometry"),
                         help="state telemetry the flight followed (default: the stream it requested)")  # fmt: skip
     parser.add_argument("--hover-thrust", type=float, help="normalised hover thrust (default: config, else logged parameter)")
+    parser.add_argument("--json", action="store_true", help="print the report and flight summary as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -357,10 +358,14 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--hover-thrust", f"must be in [0.05, 0.95] (normalised), got {args.hover_thrust}")
     if Path(args.log).is_dir():
         raise InputError("LOG", f"{args.log} is a directory; give its .tlog (e.g. {Path(args.log) / 'flight.tlog'})")
+    if args.config:
+        from pf_offboard.shipped import resolve_config
+
+        args.config = str(resolve_config(args.config))
     config_path = Path(args.config) if args.config else FlightLogPaths.beside(args.log).config_yaml
     if not config_path.exists():
         raise InputError("--config", f"no such file: {config_path}" + ("" if args.config else " (pass --config)"))
-    config = load_config(config_path)
+    config = load_config(config_path).require_local("or replay with the flight.yaml beside the log: it holds the local way-points flown")
     options = ReplayOptions(
         autopilot=args.autopilot,
         output_mode=args.output,
@@ -369,6 +374,14 @@ def run(args: argparse.Namespace) -> int:
         tolerance=args.tolerance,
     )
     report = replay_flight(args.log, config, args.steps, options)
+    if args.json:
+        from pf_offboard.logs.summary import flight_report, report_json
+
+        doc = flight_report(report.summary, 0 if report.ok else 1, "replay " + ("matches" if report.ok else "differs"),
+                            Path(args.log).parent, config, "replay")  # fmt: skip
+        doc["replay_lines"] = report.lines()
+        print(report_json(doc))
+        return 0 if report.ok else 1
     for line in report.lines():
         print(line)
     print("flight summary:")

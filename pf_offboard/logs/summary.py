@@ -18,9 +18,12 @@ Definitions (all over *active* steps, i.e. while the follower's setpoints were s
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 from pf_offboard.logs.steplog import StepRecord
 
@@ -45,6 +48,26 @@ class FlightSummary:
     whole_cross_track_max_m: float | None = None
     whole_speed_error_rms_m_s: float | None = None
     whole_speed_error_mean_m_s: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: every field by name (units in the names; None where undefined)."""
+        return {
+            "duration_s": self.duration_s,
+            "steps": self.steps,
+            "active_steps": self.active_steps,
+            "activation_time_s": self.activation_time_s,
+            "convergence_time_s": self.convergence_time_s,
+            "cross_track_rms_m": self.cross_track_rms_m,
+            "cross_track_max_m": self.cross_track_max_m,
+            "speed_error_rms_m_s": self.speed_error_rms_m_s,
+            "saturation_s": dict(self.saturation_s),
+            "mode_changes": [{"time_s": t, "from": a, "to": b} for t, a, b in self.mode_changes],
+            "events": [{"time_s": t, "event": e} for t, e in self.events],
+            "whole_cross_track_rms_m": self.whole_cross_track_rms_m,
+            "whole_cross_track_max_m": self.whole_cross_track_max_m,
+            "whole_speed_error_rms_m_s": self.whole_speed_error_rms_m_s,
+            "whole_speed_error_mean_m_s": self.whole_speed_error_mean_m_s,
+        }
 
     def lines(self) -> list[str]:
         """Human-readable summary, one fact per line."""
@@ -200,3 +223,54 @@ def summarize(
     for r in records:
         acc.add(r)
     return acc.result()
+
+
+SUMMARY_JSON = "summary.json"
+SUMMARY_SCHEMA = 1
+
+
+def flight_report(summary: FlightSummary | None, exit_code: int, reason: str, log_dir: str | Path | None,
+                  config: Any = None, command: str = "fly") -> dict[str, Any]:  # fmt: skip
+    """The end-of-flight report as one JSON-ready mapping: how the flight ended, the summary, the
+    logs, and the path's geodetic origin when the path came from a planning tool."""
+    geodetic = getattr(getattr(config, "path", None), "geodetic", None)
+    origin = getattr(geodetic, "origin", None)
+    report: dict[str, Any] = {
+        "schema": SUMMARY_SCHEMA,
+        "command": command,
+        "exit_code": exit_code,
+        "reason": reason,
+        "log_dir": str(Path(log_dir).resolve()) if log_dir is not None else None,  # absolute: machines read it from anywhere
+        "config": getattr(config, "source", None),
+        "summary": summary.to_dict() if summary is not None else None,
+    }
+    if geodetic is not None:
+        report["path_file"] = {
+            "file": geodetic.file,
+            "altitude_reference": geodetic.altitude_reference,
+            "origin": None if origin is None else {"lat_deg": origin.lat_deg, "lon_deg": origin.lon_deg, "alt_amsl_m": origin.alt_amsl_m},
+            "home_alt_amsl_m": geodetic.home_alt_amsl_m,
+        }
+    return report
+
+
+def write_report(report: dict[str, Any], log_dir: str | Path) -> Path:
+    """``LOG_DIR/summary.json`` (non-finite numbers as null)."""
+    out = Path(log_dir) / SUMMARY_JSON
+    out.write_text(report_json(report) + "\n", encoding="utf-8")
+    return out
+
+
+def report_json(report: dict[str, Any]) -> str:
+    """Strict JSON (NaN / inf become null)."""
+
+    def clean(v: Any) -> Any:
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [clean(x) for x in v]
+        return v
+
+    return json.dumps(clean(report), indent=2, allow_nan=False)

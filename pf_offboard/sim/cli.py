@@ -8,7 +8,7 @@ import argparse
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from sitl_mock.dynamics.params import DEFAULT_VEHICLE, PRESET_NAMES
 
-    parser.add_argument("--config", required=True, metavar="YAML", help="path, speed, gains, limits, flight settings")
+    parser.add_argument("--config", required=True, metavar="YAML", help="config file, or a shipped config's name (pf-offboard configs)")
     start = parser.add_mutually_exclusive_group()
     start.add_argument("--start", metavar="X,Y,Z", help="hover start, world ENU metres (z up); default: the path's start")
     start.add_argument("--throw", metavar="X,Y,Z,VX,VY,VZ",
@@ -30,6 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the simulation's random generator")
     parser.add_argument("--epoch", type=float, metavar="UNIX_S", help="UNIX time of t=0 in the .tlog (default: now)")
     parser.add_argument("--name", default="flight", help="log file stem (default flight)")
+    parser.add_argument("--json", action="store_true", help="print the flight report (as in OUT/summary.json) as JSON instead of text")
     parser.add_argument("--out", required=True, metavar="DIR", help="directory for NAME.tlog, NAME.csv, NAME.yaml")
 
 
@@ -40,8 +41,9 @@ def run(args: argparse.Namespace) -> int:
     from pf_offboard.logs._io import make_dir
     from pf_offboard.sim.flight import SimSpec, parse_gusts, parse_start, parse_throw, parse_wind, simulate
 
-    if not Path(args.config).is_file():
-        raise InputError("--config", f"no such file: {args.config}")
+    from pf_offboard.shipped import resolve_config
+
+    args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     spec = SimSpec(
         start_enu_m=parse_start(args.start) if args.start else None,
         throw_enu=parse_throw(args.throw) if args.throw else None,
@@ -60,9 +62,16 @@ def run(args: argparse.Namespace) -> int:
     )
     make_dir(args.out, "--out")
     result = simulate(args.config, spec, args.out)
-    print(f"pf-offboard sim: {result.reason} after {result.sim_time_s:.2f} s simulated"
-          + (" (CRASHED)" if result.crashed else ""))  # fmt: skip
+    if not args.json:
+        print(f"pf-offboard sim: {result.reason} after {result.sim_time_s:.2f} s simulated"
+              + (" (CRASHED)" if result.crashed else ""))  # fmt: skip
+    code = 1 if result.crashed else 0
+    if args.json:  # the report simulate() wrote beside the logs
+        from pf_offboard.logs.summary import SUMMARY_JSON
+
+        print((result.paths.tlog.parent / SUMMARY_JSON).read_text(encoding="utf-8"), end="")
+        return code
     for line in result.summary.lines():
         print("  " + line)
     print(f"logs: {result.paths.tlog} {result.paths.steps_csv}")
-    return 1 if result.crashed else 0
+    return code

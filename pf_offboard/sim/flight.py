@@ -221,6 +221,8 @@ class SimFlight:
         self.spec = spec
         self.config_path = Path(config_path)
         config = load_config(self.config_path)
+        config.require_local("sim has no vehicle to read the origin from")
+        self.config = config
         settings = flight_settings(config, argparse.Namespace(output=spec.output_mode, end_action=None))
         self.settings = settings
         rate = spec.rate_hz if spec.rate_hz is not None else min(settings.setpoint_rate_hz, MAX_RATE_HZ)
@@ -391,7 +393,7 @@ class SimFlight:
             speed = max(abs(self.pipeline.speed_ref_m_s), 0.1) if math.isfinite(self.pipeline.speed_ref_m_s) else 1.0
             limit_s = 30.0 + 3.0 * (spec.laps or 1.0) * self.path.length_m / speed
         max_steps = int(math.ceil(limit_s / self.dt_s)) + 1
-        with FlightLog.open(self.out_dir, spec.name, config_path=self.config_path) as log:
+        with FlightLog.open(self.out_dir, spec.name, config_path=self.config_path, config=self.config) as log:
             self._setup(log)
             for i in range(max_steps):
                 if self.progress is not None and i % 250 == 0:
@@ -405,9 +407,14 @@ class SimFlight:
             else:
                 self.reason = f"time limit {limit_s:.0f} s reached before {spec.laps:g} laps"
             paths = log.paths
+        summary = self.summary.result()
+        from pf_offboard.logs.summary import flight_report, write_report
+
+        crashed = bool(self.autopilot.truth.crashed)
+        write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim"), paths.tlog.parent)
         return SimResult(
             paths=paths,
-            summary=self.summary.result(),
+            summary=summary,
             reason=self.reason,
             activation_time_s=self.activation_time_s,
             crashed=bool(self.autopilot.truth.crashed),

@@ -82,4 +82,4 @@ def test_fly_logs_replay_and_plot(
     out = capsys.readouterr().out
     assert "MATCH" in out and f"{output} setpoints" in out
     assert main(["plot", str(tlog), "--out", str(tmp_path / "fig")]) == 0
-    assert {p.name for p in (tmp_path / "fig").iterdir()} == {"path3d.png", "flight_tangential.png", "flight_transversal.png"}
+    assert {p.name for p in (tmp_path / "fig").iterdir()} == {"path3d.png", "map.png", "flight_tangential.png", "flight_transversal.png"}

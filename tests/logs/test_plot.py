@@ -38,7 +38,7 @@ def test_figures_written(tmp_path: Path) -> None:
     circle_flight(tmp_path / "PF2.csv", (2.0, 0.5), thrown=True)
     pngs = make_figures([tmp_path / "PF1.csv", tmp_path / "PF2.csv"], tmp_path / "fig")
     names = sorted(p.name for p in pngs)
-    assert names == ["PF1_tangential.png", "PF1_transversal.png", "PF2_tangential.png", "PF2_transversal.png", "path3d.png"]
+    assert names == ["PF1_tangential.png", "PF1_transversal.png", "PF2_tangential.png", "PF2_transversal.png", "map.png", "path3d.png"]
     for p in pngs:
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and 5_000 < len(data) < 200_000

@@ -118,7 +118,7 @@ def test_sim_then_plot(tmp_path: Path, soft_paper: Path) -> None:
     spec = SimSpec(start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, duration_s=1.5, epoch_unix_s=EPOCH, name="PF1")
     result = simulate(soft_paper, spec, tmp_path)
     pngs = make_figures([result.paths.tlog], tmp_path / "fig")  # config found beside the log
-    assert sorted(p.name for p in pngs) == ["PF1_tangential.png", "PF1_transversal.png", "path3d.png"]
+    assert sorted(p.name for p in pngs) == ["PF1_tangential.png", "PF1_transversal.png", "map.png", "path3d.png"]
 
 
 def test_cli_sim_replay_plot(tmp_path: Path, soft_paper: Path, capsys: pytest.CaptureFixture[str]) -> None:
