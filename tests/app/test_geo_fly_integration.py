@@ -34,6 +34,9 @@ def geo_config(tmp: Path, sample: str = "mission.plan") -> Path:
         "path": {"file": sample, "altitude_reference": "relative_home", "closed": True},
         "speed_m_s": -1.5,
         "gains": {"transversal": {"bandwidth_hz": 6.0, "damping": 0.7}, "tangential": {"bandwidth_hz": 4.0, "damping": 0.8}},
+        # the paper's setting on the mock's ideal vehicle (as configs/paper.yaml)
+        "vehicle": {"accel_lag_xy_s": 0.0, "accel_lag_z_s": 0.0, "accel_delay_s": 0.0},
+        "compensation": {"enabled": False},
         "flight": {"setpoint_rate_hz": RATE_HZ},
     }
     p = tmp / "geo.yaml"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 from sitl_mock.config import FaultConfig
 from sitl_mock.runner import run_in_thread
 from sitl_mock.testing import free_udp_port
@@ -23,7 +24,12 @@ def test_a_50_m_estimator_jump_is_refused_then_flagged_as_an_estimator_reset(tmp
     monitor reads (``Estimator.rejected_jumps`` / ``position_resets``) count it. Ending following on
     such a reset is the envelope monitor's decision, not the estimator's."""
     app_port = free_udp_port()
+    # the envelope (issue 9) would end following on the jumped position (tests/faults/test_fence.py):
+    # a fence wide enough for the jump isolates the estimator's own behaviour
     config = write_config(tmp_path)
+    data = yaml.safe_load(config.read_text())
+    data["safety"] = {"fence_margin_m": 100.0, "max_path_distance_m": 100.0}
+    config.write_text(yaml.safe_dump(data))
     faults = FaultConfig(estimator_reset_at_s=5.0, estimator_reset_ned_m=(50.0, 0.0, 0.0))
     with run_in_thread(mock_config(app_port, faults=faults)) as mock:
         outcome, printed = fly_udpin(app_port, config, tmp_path / "log", "--airborne", "--duration", "5.5")

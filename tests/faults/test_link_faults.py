@@ -116,7 +116,9 @@ def test_mock_with_signing_refuses_an_unsigned_app(tmp_path) -> None:
     key = _key_file(tmp_path, "key", "f" * 64)
     config = write_config(tmp_path)
     with run_in_thread(mock_config(app_port, signing_key_file=key)) as mock:
-        outcome, printed = fly_udpin(app_port, config, tmp_path / "log", "--airborne", "--duration", "4", heartbeat_timeout_s=2.0)
+        # --ready-timeout: the refused app waits for a position estimate that never comes
+        outcome, printed = fly_udpin(app_port, config, tmp_path / "log", "--airborne", "--duration", "4",
+                                     "--ready-timeout", "5", heartbeat_timeout_s=2.0)  # fmt: skip
         mode, armed, _ = _mock_state(mock)
         refused = mock.call(lambda m: m.rejected_signature)
         steps = mock.call(lambda m: m.steps)
