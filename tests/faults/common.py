@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from sitl_mock.config import FaultConfig, MockConfig, SpawnSpec
 
 from pf_offboard.logs.tlog import read_tlog
-from tests.app.flights import PAPER, RATE_HZ
+from app.flights import PAPER, RATE_HZ
 
 HOVER_NED = (-3.0, 0.0, -2.0)  # ENU (0, -3, 2): 1.5 m beside the paper path's PF1 start
 SETPOINT_TYPES = ("SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from sitl_mock.runner import spawn
 
-from tests.app.flights import run_fly
+from app.flights import run_fly
 
 from .common import entries, hover, last_heartbeat_mode, is_mode_request, is_safe_setpoint, own_clock, read_truth, write_config
 

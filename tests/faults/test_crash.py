@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from sitl_mock.runner import run_in_thread
 
-from tests.app.flights import run_fly
+from app.flights import run_fly
 
 from .common import SETPOINT_TYPES, hover, is_safe_setpoint, lockstep, outgoing, write_config
 

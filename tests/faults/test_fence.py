@@ -9,7 +9,7 @@ import pytest
 from sitl_mock.runner import run_in_thread
 
 from pf_offboard.cli import main
-from tests.app.flights import run_fly
+from app.flights import run_fly
 
 from .common import SETPOINT_TYPES, hover, is_mode_request, is_safe_setpoint, lockstep, outgoing, write_config
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 from sitl_mock.runner import spawn
 
-from tests.app.flights import run_fly
+from app.flights import run_fly
 
 from .common import hover, last_heartbeat_mode, own_clock, read_truth, write_config
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 from sitl_mock.runner import run_in_thread
 
-from tests.app.flights import run_fly
+from app.flights import run_fly
 
 from .common import PX4_POSCTL, SETPOINT_TYPES, entries, hover, is_mode_request, lockstep, write_config
 
