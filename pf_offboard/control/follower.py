@@ -256,7 +256,7 @@ class PathFollower:
         if tube is None:
             w = 1.0
         # unit tangent and arclength derivatives at lam* (approach law, yaw, jerk feed-forward)
-        tan = onpath_derivatives(s[3:6], s[6:9], s[9:12])[0]
+        tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
         if w > 0.0:
             app = law.approach(r, v, tan, 0.0 if past_end else eta2_ref)
             if tube is None:
@@ -280,7 +280,6 @@ class PathFollower:
         # on-path jerk at eta2_ref (eqs. 25-27: jerk = sigma_sss eta2_ref^3), faded out with the
         # fallback weight (no on-path motion to anticipate far away): feed-forward of the body
         # rates and of the inner loop's lag
-        tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
         k3 = (1.0 - w) * eta2_ref * eta2_ref * eta2_ref
         jerk = (s_sss[0] * k3, s_sss[1] * k3, s_sss[2] * k3)
         if comp is not None:
