@@ -6,8 +6,8 @@ horizontal gain below one and 1 s⁻¹ of linear drag, so a 1.5 Hz loop on top o
 flies 10–15 % slow. This module makes the plant seen by the control law a double integrator
 again, with the identified :class:`~pf_offboard.control.types.VehicleModel`:
 
-``dv/dt = gain ⊙ a_sp(t − H) − drag ⊙ v + d``, ``H = accel_delay_s + accel_lag_s`` (a first-order
-lag is approximated by an equal dead time: the same phase up to the loop's crossover).
+``dv/dt = gain ⊙ lag(a_sp(t − delay)) − drag ⊙ v + d`` (per axis group; delays ``accel_delay_s``
+for x/y and ``accel_delay_z_s`` for z, first-order lags ``accel_lag_*_s``).
 
 Per control step, world frame ENU (m, m/s, m/s²):
 
@@ -15,8 +15,9 @@ Per control step, world frame ENU (m, m/s, m/s²):
    what the model does not explain — wind, a wrong hover thrust, battery sag, drag the model
    misses — from the measured velocity and the setpoints actually sent. It sees the clipped
    setpoint, so saturation cannot wind it up; ``d`` is also bounded by ``max_disturbance_m_s2``.
-2. **Predictor** (Smith): integrates the model over the setpoints already sent to the state at
-   ``t + H`` — the state the next setpoint will act on. The control law runs on it.
+2. **Predictor** (Smith): integrates the model (lag filter included) over the setpoints already
+   sent to the state at ``t + delay`` — when the next setpoint starts to act. The control law runs
+   on it; the lag stays part of the plant (the follower leads it with the on-path jerk).
 3. **Inversion**: the law's acceleration ``a`` becomes ``a_sp = (a + drag ⊙ v̂ − d̂) / gain``.
 
 With ``d̂ = d`` the loop is the nominal one, so the path stays invariant; the observer adds no
@@ -63,8 +64,6 @@ class InnerLoopCompensator:
         self.delay_s = model.accel_delay_s
         self.delay_z_s = model.accel_delay_s if model.accel_delay_z_s is None else model.accel_delay_z_s
         self.lag: Vec = (model.accel_lag_xy_s, model.accel_lag_xy_s, model.accel_lag_z_s)
-        self.horizon_s = self.delay_s + model.accel_lag_xy_s
-        self.horizon_z_s = self.delay_z_s + model.accel_lag_z_s
         self.gain: Vec = (model.accel_gain_xy, model.accel_gain_xy, model.accel_gain_z)
         self.drag: Vec = (model.drag_xy_1_s, model.drag_xy_1_s, model.drag_z_1_s)
         self.observer_rad_s = float(observer_rad_s)
