@@ -159,7 +159,17 @@ class Autopilot:
             self._pending.append((f.disarm_at_s, "disarm", None))
         if f.motor_failure_at_s is not None:
             self._pending.append((f.motor_failure_at_s, "motor_failure", None))
+        if f.clock_jump_at_s is not None:
+            self._pending.append((f.clock_jump_at_s, "clock_jump", f.clock_jump_s))
+        if f.attitude_future_at_s is not None:
+            self._pending.append((f.attitude_future_at_s, "future_attitude", f.attitude_future_by_s))
+        if f.thrust_loss_at_s is not None:
+            self._pending.append((f.thrust_loss_at_s, "thrust_loss", f.thrust_loss_factor))
+        if f.offboard_stuck_at_s is not None:
+            self._pending.append((f.offboard_stuck_at_s, "offboard_stuck", None))
         self.motors_failed = False  # a motor failure: no thrust whatever the mode (the vehicle falls)
+        self.clock_offset_s = f.clock_at_start_s  # added to every timestamp sent (clock faults)
+        self.offboard_stuck_at: np.ndarray | None = None  # offboard-stuck fault: where it holds (estimate)
         self.fault_injector: Any = None  # set by the server: told when OFFBOARD / GUIDED is first entered
 
     # ------------------------------------------------------------------------------------------
@@ -174,6 +184,11 @@ class Autopilot:
     def est_velocity_ned_m_s(self) -> np.ndarray:
         """Reported velocity: truth + the preset's EKF-like error (NED, m/s)."""
         return self._estimate()[1]
+
+    @property
+    def reported_time_s(self) -> float:
+        """The autopilot's clock as its messages report it (time since boot, plus any clock jump)."""
+        return self.time_s + self.clock_offset_s
 
     @property
     def ekf_ready(self) -> bool:
@@ -304,7 +319,7 @@ class Autopilot:
             reply = mavlink.MAVLink_ping_message(msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent())
             return [(link, reply)]
         if msgid == mavlink.MAVLINK_MSG_ID_TIMESYNC and msg.tc1 == 0:
-            return [(link, mavlink.MAVLink_timesync_message(int(self.time_s * 1e9), msg.ts1))]
+            return [(link, mavlink.MAVLink_timesync_message(int(self.reported_time_s * 1e9), msg.ts1))]
         return []
 
     @staticmethod
@@ -670,6 +685,18 @@ class Autopilot:
             elif kind == "motor_failure":
                 self.motors_failed = True
                 out.append(self._text(mavlink.MAV_SEVERITY_EMERGENCY, "Motor failure"))
+            elif kind == "clock_jump":
+                self.clock_offset_s += float(arg)  # type: ignore[arg-type]
+                self.log.append(LogEvent(self.time_s, f"clock jumped {float(arg):+g} s (fault injection)"))  # type: ignore[arg-type]
+            elif kind == "future_attitude":
+                out.append((None, telemetry.future_attitude_quaternion(self, float(arg))))  # type: ignore[arg-type]
+                self.log.append(LogEvent(self.time_s, f"future-dated ATTITUDE_QUATERNION (+{float(arg):g} s) sent"))  # type: ignore[arg-type]
+            elif kind == "thrust_loss":
+                self.sim.lose_thrust(float(arg))  # type: ignore[arg-type]
+                out.append(self._text(mavlink.MAV_SEVERITY_CRITICAL, "Thrust loss"))
+            elif kind == "offboard_stuck":
+                self.offboard_stuck_at = self._estimate()[0].copy()
+                self.log.append(LogEvent(self.time_s, "offboard setpoints no longer flown (fault injection)"))
 
     def _supervise(self, out: list[Out]) -> None:
         now = self.time_s
@@ -781,6 +808,8 @@ class Autopilot:
         return self._land(dt_s, landed)
 
     def _offboard(self, dt_s: float, pos: np.ndarray, vel: np.ndarray, landed: bool) -> Setpoint:
+        if self.offboard_stuck_at is not None:
+            return self._position_sp(self.offboard_stuck_at, self.hold_yaw)
         if self.profile.name == "ardupilot":
             sp = self.guided.update(
                 dt_s, self.time_s, self.params["GUID_TIMEOUT"], int(self.params["GUID_OPTIONS"]),

@@ -105,9 +105,27 @@ class FaultConfig:
     # blackout_s / heartbeat_mute_s count from the first entry into OFFBOARD / GUIDED instead of
     # boot (a test's fault then falls inside the flight however long the client took to start)
     windows_from_offboard: bool = False
+    # the autopilot's clock jumps: from clock_jump_at_s on, every time_boot_ms / time_usec it sends
+    # is off by clock_jump_s (forward or back: a reboot, a clock reset); the vehicle does not move
+    clock_jump_at_s: float | None = None
+    clock_jump_s: float = -20.0
+    clock_at_start_s: float = 0.0  # the clock the autopilot reports at the mock's start (booted that long ago)
+    # ATTITUDE_QUATERNION reordered: each sample is held back with this probability and sent after
+    # the next one (an older sample arriving after a newer one); at attitude_future_at_s one extra
+    # sample dated attitude_future_by_s ahead, carrying a 90 deg roll (flown, it would flip the vehicle)
+    attitude_reorder: float = 0.0
+    attitude_future_at_s: float | None = None
+    attitude_future_by_s: float = 5.0
+    # every motor's full thrust x thrust_loss_factor from thrust_loss_at_s (a sagging battery,
+    # damaged propellers): below 1 / thrust-to-weight the vehicle sinks and lands whatever it is told
+    thrust_loss_at_s: float | None = None
+    thrust_loss_factor: float = 0.25
+    # from offboard_stuck_at_s the autopilot stays in OFFBOARD / GUIDED and accepts setpoints but no
+    # longer flies them: it holds where it is (a vehicle that cannot make progress)
+    offboard_stuck_at_s: float | None = None
 
     def validate(self) -> None:
-        for name in ("loss", "duplicate", "corrupt"):
+        for name in ("loss", "duplicate", "corrupt", "attitude_reorder"):
             value = getattr(self, name)
             if not (0.0 <= value <= 1.0):
                 raise MockConfigError(f"faults.{name}", f"must be a fraction in [0, 1], got {value}")
@@ -124,10 +142,21 @@ class FaultConfig:
         for name in ("estimator_reset_ned_m", "gust_ned_m_s"):
             if not all(math.isfinite(v) for v in getattr(self, name)):
                 raise MockConfigError(f"faults.{name}", "values must be finite")
-        for name in ("estimator_reset_at_s", "takeover_at_s", "gust_at_s", "disarm_at_s", "motor_failure_at_s"):
+        for name in ("estimator_reset_at_s", "takeover_at_s", "gust_at_s", "disarm_at_s", "motor_failure_at_s",
+                     "clock_jump_at_s", "attitude_future_at_s", "thrust_loss_at_s", "offboard_stuck_at_s"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value >= 0.0):
                 raise MockConfigError(f"faults.{name}", f"must be a finite time >= 0 s, got {value}")
+        if not (math.isfinite(self.clock_at_start_s) and 0.0 <= self.clock_at_start_s <= 1e6):
+            raise MockConfigError("faults.clock_at_start_s", f"must be in [0, 1e6] s, got {self.clock_at_start_s}")
+        at = self.clock_jump_at_s
+        if not math.isfinite(self.clock_jump_s) or (at is not None and self.clock_at_start_s + at + self.clock_jump_s < 0.0):
+            raise MockConfigError("faults.clock_jump_s", f"must be finite and keep the clock >= 0 (clock {self.clock_at_start_s:g} s "
+                                  f"+ jump at {at} s), got {self.clock_jump_s}")
+        if not (math.isfinite(self.attitude_future_by_s) and self.attitude_future_by_s > 0.0):
+            raise MockConfigError("faults.attitude_future_by_s", f"must be > 0 s, got {self.attitude_future_by_s}")
+        if not (math.isfinite(self.thrust_loss_factor) and 0.0 < self.thrust_loss_factor <= 1.0):
+            raise MockConfigError("faults.thrust_loss_factor", f"must be in (0, 1], got {self.thrust_loss_factor}")
 
 
 @dataclass(frozen=True)

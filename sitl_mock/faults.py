@@ -24,6 +24,8 @@ class FaultInjector:
         self.dropped_in = 0
         self.duplicated = 0
         self.corrupted = 0
+        self.reordered = 0  # ATTITUDE_QUATERNION samples sent after a newer one
+        self._held: dict[object, bytes] = {}  # per peer: the attitude sample held back
         # where the blackout / mute windows count from (None: not yet, see windows_from_offboard)
         self.origin_s: float | None = None if config.windows_from_offboard else 0.0
 
@@ -71,6 +73,18 @@ class FaultInjector:
         if cfg.jitter_s > 0.0:
             delay += cfg.jitter_s * self.rng.random()
         return [(now_s + delay, data)] * copies
+
+    def reorder_attitude(self, peer: object, data: bytes) -> list[bytes]:
+        """What to send now for one encoded ATTITUDE_QUATERNION to ``peer``, in order: nothing (held
+        back, with probability ``attitude_reorder``), or it followed by the one held before it."""
+        held = self._held.pop(peer, None)
+        if held is None:
+            if self.rng.random() < self.config.attitude_reorder:
+                self._held[peer] = data
+                return []
+            return [data]
+        self.reordered += 1
+        return [data, held]
 
     def drop_incoming(self) -> bool:
         if self.config.loss > 0.0 and self.rng.random() < self.config.loss:

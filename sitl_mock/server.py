@@ -30,6 +30,7 @@ from sitl_mock.faults import FaultInjector
 
 UDP_LINK = 0
 _KEEPALIVE_IDS = (mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_SYS_STATUS)
+_ATTITUDE_ID = mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION
 
 
 @dataclass(frozen=True)
@@ -365,18 +366,21 @@ class MockAutopilot:
     def _emit(self, outs: list[Out]) -> None:
         now = self.autopilot.time_s
         faults = self.faults
+        reorder_on = faults.config.attitude_reorder > 0.0
         for link, msg in outs:
             if link is None or msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
                 if self._loop is not None:
                     self._last_heartbeat_wall = self._loop.time()
+            reorder = reorder_on and msg.get_msgId() == _ATTITUDE_ID and not getattr(msg, "fault_injected", False)
             for peer in self._peers_of(link):
                 data = encode(peer.mav, msg)
-                for release, chunk in faults.outgoing(data, now):
-                    if release <= now:
-                        peer.queue(chunk)
-                    else:
-                        self._delay_seq += 1
-                        heapq.heappush(self._delayed, (release, self._delay_seq, peer, chunk))
+                for frame in faults.reorder_attitude(peer, data) if reorder else (data,):
+                    for release, chunk in faults.outgoing(frame, now):
+                        if release <= now:
+                            peer.queue(chunk)
+                        else:
+                            self._delay_seq += 1
+                            heapq.heappush(self._delayed, (release, self._delay_seq, peer, chunk))
 
     def _flush_delayed(self) -> None:
         now = self.autopilot.time_s

@@ -78,11 +78,11 @@ class StreamTable:
 
 
 def _time_boot_ms(ap: Autopilot) -> int:
-    return int(ap.time_s * 1000.0) & 0xFFFFFFFF
+    return int(ap.reported_time_s * 1000.0) & 0xFFFFFFFF
 
 
 def _time_usec(ap: Autopilot) -> int:
-    return int(ap.time_s * 1e6)
+    return int(ap.reported_time_s * 1e6)
 
 
 def ned_to_global(ap: Autopilot, position_ned_m: np.ndarray) -> tuple[int, int, int]:
@@ -132,6 +132,16 @@ def attitude_quaternion(ap: Autopilot) -> mavlink.MAVLink_message:
     w, x, y, z = (float(v) for v in s.q_ned_frd)
     p, q, r = (float(v) for v in s.rates_frd_rad_s)
     return mavlink.MAVLink_attitude_quaternion_message(_time_boot_ms(ap), w, x, y, z, p, q, r, [0.0] * 4)
+
+
+def future_attitude_quaternion(ap: Autopilot, ahead_s: float) -> mavlink.MAVLink_message:
+    """A bogus ATTITUDE_QUATERNION dated ``ahead_s`` in the future: rolled 90 deg, rolling at 3 rad/s
+    (fault injection: a receiver that believed it would fly a vehicle on its side)."""
+    stamp = int((ap.reported_time_s + ahead_s) * 1000.0) & 0xFFFFFFFF
+    h = math.sqrt(0.5)
+    msg = mavlink.MAVLink_attitude_quaternion_message(stamp, h, h, 0.0, 0.0, 3.0, 0.0, 0.0, [0.0] * 4)
+    msg.fault_injected = True  # the reordering fault leaves it alone (counted on its own)
+    return msg
 
 
 def local_position_ned(ap: Autopilot) -> mavlink.MAVLink_message:

@@ -350,8 +350,6 @@ class Bridge:
         if kind == "EXTENDED_SYS_STATE":
             self.landed_state = int(msg.landed_state)
             return
-        if kind in ("ATTITUDE_QUATERNION", "ODOMETRY"):
-            self._last_attitude_wall = self.clock()  # rates mode flies only on a fresh attitude
         if kind == "COMMAND_ACK":
             self.acks[msg.command] = msg.result
             self._changed.set()
@@ -368,7 +366,14 @@ class Bridge:
             self.last_statustext = text.rstrip("\x00")
             self._print(f"autopilot: {self.last_statustext}")
             return
-        if self.pipeline.on_message(msg):
+        estimator = self.pipeline.estimator
+        attitudes = estimator.attitude_samples
+        fresh = self.pipeline.on_message(msg)
+        if estimator.attitude_samples != attitudes:
+            # rates mode flies only on a fresh attitude: one the estimator accepted (a reordered,
+            # duplicated or future-dated sample that arrives is not a fresh attitude)
+            self._last_attitude_wall = self.clock()
+        if fresh:
             self._last_fresh_wall = self.clock()
             self._rate_count += 1
             self._on_state()
@@ -494,7 +499,9 @@ class Bridge:
         cmd = step.command if step is not None else None
         rates = self.pipeline.encoder.output_mode == "rates"
         return VehicleSample(
-            time_s=est.time_s,
+            # the monitor's durations (no-progress window, attitude-error time) on the estimator's
+            # continuous clock: an autopilot clock jump is not 30 s without progress
+            time_s=flight_clock_s(est),
             position_enu_m=est.position_enu_m,
             velocity_enu_m_s=est.velocity_enu_m_s,
             q_enu_flu=est.q_enu_flu,

@@ -160,6 +160,7 @@ class Estimator:
         self._jump_candidate: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None
         self._clock_s = 0.0
         self.samples = 0
+        self.attitude_samples = 0  # attitudes accepted (ATTITUDE_QUATERNION, or ODOMETRY's pose)
         self.rejected = 0
         self.rejected_old = 0
         self.rejected_jumps = 0
@@ -223,6 +224,7 @@ class Estimator:
             self.clock_reanchors += 1
         self._q_ned_frd = q
         self._rates_frd = np.array(rates, dtype=float)
+        self.attitude_samples += 1
 
     def _plausible(self, time_s: float, pos_ned: NDArray[np.float64], vel_ned: NDArray[np.float64], verdict: str, announced: bool) -> bool:
         """Position-jump check of a sample whose time was accepted; False: refused (counted)."""
@@ -328,6 +330,7 @@ class Estimator:
         self._q_ned_frd = q
         if np.all(np.isfinite(rates)):
             self._rates_frd = rates
+        self.attitude_samples += 1
         if announced:
             self._reset(f"estimator reset_counter {self._reset_counter} -> {counter}")
         self._reset_counter = counter

@@ -6,7 +6,7 @@ Sections:
 - ``mavlink``: lockstep simulation speed over loopback MAVLink with a client in the loop (× real
   time), and the app's state-in → setpoint-out latency (median, p99 ms at 250 Hz).
 - ``memory``: resident memory of ``sim`` and ``fly`` over an hour of simulated time (``--quick``:
-  10 minutes): RSS after 1 simulated minute, at the end, growth in percent.
+  10 minutes; ``--minutes N``: N): RSS after 1 simulated minute, at the end, growth in percent.
 """
 
 from __future__ import annotations
@@ -36,6 +36,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     parser.add_argument("--quick", action="store_true", help="fewer samples (smoke run)")
+    parser.add_argument("--minutes", type=_minutes, default=None, metavar="N",
+                        help="memory: simulated minutes per flight (default 60, --quick 10; at least 2)")
+
+
+def _minutes(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a number of minutes expected, got {text!r}") from None
+    if not (2.0 <= value <= 24 * 60):  # the reference sample is taken after 1 simulated minute
+        raise argparse.ArgumentTypeError(f"must be between 2 and 1440 minutes, got {text}")
+    return value
 
 
 def _section(module_name: str, func_name: str) -> Callable[..., dict[str, Any]]:
@@ -52,7 +64,10 @@ def run(args: argparse.Namespace) -> int:
     for name, module_name, func_name in SECTIONS:
         if name not in chosen:
             continue
-        results[name] = _section(module_name, func_name)(quick=args.quick)
+        kwargs: dict[str, Any] = {"quick": args.quick}
+        if name == "memory" and getattr(args, "minutes", None) is not None:
+            kwargs["minutes"] = args.minutes
+        results[name] = _section(module_name, func_name)(**kwargs)
         if not args.json:
             print(f"[{name}]")
             for key, value in results[name].items():

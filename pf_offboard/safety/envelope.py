@@ -3,8 +3,9 @@
 :class:`EnvelopeMonitor` sits between the controller and the link: the bridge feeds it every
 state sample (:meth:`EnvelopeMonitor.check_state`) and every setpoint *before* it is sent
 (:meth:`EnvelopeMonitor.check_setpoint`); a :class:`Verdict` with ``breach`` set ends following
-with the configured action. No clocks and no I/O: time is the autopilot's (the samples' own
-``time_s``), so the same telemetry always gives the same verdicts (tests, ``replay``).
+with the configured action. No clocks and no I/O: time is the vehicle's (the samples' own
+``time_s``, the autopilot's clock without its jumps), so the same telemetry always gives the same
+verdicts (tests, ``replay``).
 
 Everything here is in the core's frames (world ENU, body FLU); nothing is converted.
 """
@@ -221,7 +222,9 @@ OK = Verdict()
 
 @dataclass(frozen=True)
 class VehicleSample:
-    """What the monitor looks at for one state sample (world ENU, body FLU; autopilot time)."""
+    """What the monitor looks at for one state sample (world ENU, body FLU). ``time_s`` is only
+    used for durations: give a continuous clock (the bridge gives the estimator's flight clock,
+    the autopilot's time without its jumps)."""
 
     time_s: float
     position_enu_m: NDArray[np.float64]

@@ -213,6 +213,14 @@ class Simulator:
         if self._est is not None:
             self._est.advance_to(self._ticks * PHYSICS_DT_S)
 
+    def lose_thrust(self, factor: float) -> None:
+        """Every motor's full (and idle) thrust x ``factor`` from now on: a sagging battery, damaged
+        propellers. The autopilot's hover-thrust parameter is not told: below 1 / thrust-to-weight
+        the vehicle sinks whatever it is commanded. (Fault injection; :attr:`params` unchanged.)"""
+        factor = _num("Simulator.lose_thrust", "factor", factor, 1e-6, 1.0)
+        self._tmax *= factor
+        self._tmin *= factor
+
     def estimate_error(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """(position m, velocity m/s) error of the reported state, world NED: reported − true.
         Zero unless ``params.estimator`` is on (see :mod:`sitl_mock.dynamics.estimator`)."""

@@ -63,8 +63,14 @@ def test_takeoff_heading_waits_for_an_attitude_sample() -> None:
     async def scenario() -> float:
         task = asyncio.ensure_future(bridge._first_state(bridge.clock() + 5.0, need_attitude=True))
         bridge.on_message(local_position(10))  # position first: no attitude yet
-        await asyncio.sleep(0.05)
-        assert not task.done()  # still waiting for the attitude
+        # wake the waiter as any event would and let it look (it clears the event to wait again):
+        # a condition, not a wall-clock pause
+        bridge._changed.set()
+        deadline = asyncio.get_running_loop().time() + 5.0
+        while bridge._changed.is_set() and not task.done() and asyncio.get_running_loop().time() < deadline:
+            await asyncio.sleep(0)
+        assert not bridge._changed.is_set()  # it looked at the position-only state ...
+        assert not task.done()  # ... and still waits for the attitude
         bridge.on_message(attitude_quaternion(12, q_ned_frd=tuple(north)))
         bridge.on_message(local_position(20))
         est = await asyncio.wait_for(task, 2.0)
@@ -167,3 +173,21 @@ def test_px4_takeoff_retries_arming_until_the_checks_pass(tmp_path) -> None:
     accepted = [e for e in arm_acks if e.message.result == mavlink2.MAV_RESULT_ACCEPTED]
     assert refused and accepted and refused[0].time_unix_s < accepted[0].time_unix_s
     assert accepted[0].time_unix_s - refused[0].time_unix_s > 5.0  # beyond the old 5 s limit
+
+
+def test_only_an_accepted_attitude_counts_as_fresh() -> None:
+    """Rates mode flies only on a fresh attitude. An ATTITUDE_QUATERNION the estimator refuses
+    (older than the last one, or future-dated) arrives but is not a fresh attitude: it must not
+    renew the freshness the level-hold fallback is judged by."""
+    now = [100.0]
+    pipe = Pipeline(_Follower(), Encoder("rates", PX4, 1, 1), Estimator("local_position"))
+    opts = BridgeOptions(launch="airborne", height_m=math.nan, end=EndSpec(laps=1), status=False)
+    bridge = Bridge(_FakeLink(), PX4, pipe, opts, 15.0, True, 1.0, status_stream=io.StringIO(), clock=lambda: now[0])  # type: ignore[arg-type]
+    bridge.on_message(attitude_quaternion(2000))
+    assert bridge._last_attitude_wall == 100.0
+    now[0] = 101.0
+    bridge.on_message(attitude_quaternion(1990))  # reordered: older than the last
+    bridge.on_message(attitude_quaternion(9000))  # future-dated: a candidate, refused
+    assert pipe.estimator.rejected == 2 and bridge._last_attitude_wall == 100.0
+    bridge.on_message(attitude_quaternion(2004))  # the genuine stream continues
+    assert bridge._last_attitude_wall == 101.0

@@ -32,13 +32,15 @@ def _mav(system: int = 1, component: int = 1) -> mavlink2.MAVLink:
     return mavlink2.MAVLink(None, srcSystem=system, srcComponent=component)
 
 
-async def _settle(link: Link, got: list, until: str) -> None:
-    """Let the reader run until a message of type ``until`` from the target has been handled."""
-    for _ in range(200):
-        if any(m.get_type() == until for m in got):
-            return
-        await asyncio.sleep(0.005)
-    raise AssertionError(f"no {until} handled; counters {link.counters}")
+async def _settle(link: Link, got: list, until: str, timeout_s: float = 10.0) -> None:
+    """Let the reader run until a message of type ``until`` from the target has been handled (it was
+    sent last: everything before it has been read too), or fail after ``timeout_s``."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout_s
+    while not any(m.get_type() == until for m in got):
+        if loop.time() > deadline:
+            raise AssertionError(f"no {until} handled within {timeout_s} s; counters {link.counters}")
+        await asyncio.sleep(0.001)
 
 
 def test_only_the_target_component_at_the_locked_address_is_believed() -> None:
@@ -66,9 +68,10 @@ def test_only_the_target_component_at_the_locked_address_is_believed() -> None:
             autopilot.sendto(mavlink2.MAVLink_local_position_ned_message(22, 1.0, 0.0, -2.0, 0, 0, 0).pack(ap_mav), dest)
             autopilot.sendto(mavlink2.MAVLink_sys_status_message(0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(ap_mav), dest)
             await _settle(link, got, "SYS_STATUS")
-            # udpin answers only the locked peer: the spoofer, who sent datagrams too, gets nothing
+            # udpin answers only the locked peer: the spoofer, who sent datagrams too, gets nothing.
+            # sendto on loopback delivers before it returns: once send_heartbeat() is back, anything
+            # it sent is already in the receivers' buffers (no waiting needed to see a leak)
             link.send_heartbeat()
-            await asyncio.sleep(0.05)
             leaked = []
             while True:
                 try:
@@ -124,9 +127,8 @@ def test_reader_yields_after_its_budget_so_timers_run_during_a_flood() -> None:
                     await asyncio.sleep(0)
 
             task = asyncio.create_task(timer())
-            for _ in range(2000):
-                if handled == burst:
-                    break
+            deadline = asyncio.get_running_loop().time() + 10.0
+            while handled < burst and asyncio.get_running_loop().time() < deadline:
                 await asyncio.sleep(0)
             task.cancel()
             # the timer ran while the backlog was being read, not only before and after it

@@ -1,0 +1,56 @@
+"""A vehicle that comes down mid-flight: from t = 3 s every motor gives only 45 % of its full
+thrust (a sagging battery, damaged propellers; thrust-to-weight 3.5 -> 1.6, too little to hold
+height at the path's tilts). It sinks whatever it is commanded, touches down and is disarmed by
+the autopilot (the mock's touchdown faster than 3 m/s is a crash). The floor is put below the
+ground for this test so that the fence does not end the flight first. The app ends within 1 s of
+the touchdown with exit 6 and sends nothing after it (no setpoint, no mode request to a disarmed
+vehicle). Before issue 9 the app followed a crashed, disarmed wreck for 160 s and exited 0.
+
+(The mock's touchdowns on the paper path at these gains are all harder than its 3 m/s crash
+speed, so the EXTENDED_SYS_STATE "on the ground while armed" branch stays covered by
+tests/safety/test_envelope.py.)"""
+
+from __future__ import annotations
+
+import pytest
+from sitl_mock.runner import run_in_thread
+
+from app.flights import run_fly
+
+from .common import SETPOINT_TYPES, hover, is_mode_request, lockstep, outgoing, write_config
+
+pytestmark = pytest.mark.integration
+
+THRUST_LOSS_AT_S = 3.0
+
+
+def test_coming_down_mid_flight_ends_the_flight_within_1_s_with_exit_6(tmp_path) -> None:
+    config = write_config(tmp_path, safety={"min_altitude_m": -1.0, "fence_margin_m": 3.0})
+    cfg = lockstep("px4", hover(), thrust_loss_at_s=THRUST_LOSS_AT_S, thrust_loss_factor=0.45)
+    touchdown: list[float] = []
+
+    def watch(m) -> None:  # noqa: ANN001
+        def record(_msg, _addr) -> None:
+            if m.truth.landed and not touchdown:
+                touchdown.append(m.autopilot.time_s)
+
+        m.on_received = record
+
+    with run_in_thread(cfg) as mock:
+        mock.call(watch)
+        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--duration", "30")
+        mode, armed, landed = mock.call(lambda m: (m.autopilot.mode.name, m.autopilot.armed, m.truth.landed))
+    out = outgoing(tmp_path / "log")
+    breach_ms = round(outcome.breach_time_s * 1000)
+    after = [m for m in out if m.get_type() in SETPOINT_TYPES and m.time_boot_ms >= breach_ms]
+    print(f"\nthrust loss at {THRUST_LOSS_AT_S} s, touchdown at {touchdown[0]:.3f} s: {outcome.reason} "
+          f"(exit {outcome.exit_code}) at {outcome.breach_time_s} s; {len(after)} setpoints after it; "
+          f"vehicle {mode}, armed {armed}, on the ground {landed}")  # fmt: skip
+    assert outcome.exit_code == 6, outcome.reason
+    assert "the vehicle disarmed in flight" in outcome.reason, outcome.reason
+    # seen within 1 s of the touchdown, and not before it
+    assert touchdown[0] <= outcome.breach_time_s <= touchdown[0] + 1.0
+    assert landed and not armed
+    # nothing after the disarm was seen but at most the setpoint already stamped with that sample
+    assert len(after) <= 1 and not [m for m in out if m.get_type() in SETPOINT_TYPES and m.time_boot_ms > breach_ms]
+    assert not [m for m in out[-len(after) - 1:] if is_mode_request(m)]
