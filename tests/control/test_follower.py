@@ -31,11 +31,11 @@ def test_invariance_60_s_rk4(paper_path, speed):
     lam0 = 0.37 * paper_path.lam_max
     y = paper_path.eval(lam0).sigma.copy()
     v = speed * paper_path.frame(lam0).t
-    dt = 1e-3
+    dt = 2.5e-3  # RK4: the discretisation error (~dt^4) stays far below the 1e-5 m bound
     worst = 0.0
     eta1_travel = 0.0
     prev = f.transverse_state(y, v).eta1
-    for _ in range(60_000):
+    for _ in range(round(60.0 / dt)):
         y, v, cmd = rk4_step(f, y, v, dt)
         st = cmd.state  # at the start of the step
         worst = max(worst, math.hypot(st.xi1, st.phi1))

@@ -25,9 +25,11 @@ SETPOINT_TYPES = ("SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET")
 PX4_POSCTL = 3 << 16
 
 
-def write_config(tmp: Path, safety: dict | None = None, rate_hz: float = RATE_HZ, **flight: object) -> Path:
+def write_config(tmp: Path, safety: dict | None = None, rate_hz: float = RATE_HZ, gains: dict | None = None, **flight: object) -> Path:
     data = yaml.safe_load(PAPER.read_text())
     data["speed_m_s"] = -1.5
+    if gains is not None:
+        data["gains"] = gains
     data["flight"] = {"setpoint_rate_hz": rate_hz, "attitude_time_constant_s": 0.05, **flight}
     if safety is not None:
         data["safety"] = safety

@@ -19,7 +19,11 @@ pytestmark = pytest.mark.integration
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_loss_and_blackout_end_in_the_requested_hold_not_rtl(tmp_path, seed: int) -> None:
-    config = write_config(tmp_path)
+    # Gains a lossy link can carry: 40 % loss holds setpoints for several periods (an extra delay
+    # the paper's 6 Hz loop has no margin for; it then ends in a tilt breach before the blackout,
+    # which is safe but not the case under test).
+    config = write_config(tmp_path, gains={"transversal": {"bandwidth_hz": 2.0, "damping": 0.9},
+                                           "tangential": {"bandwidth_hz": 1.5, "damping": 1.0}})
     truth_log = tmp_path / "truth.csv"
     cfg = own_clock("px4", hover(), truth_log, loss=0.4, blackout_s=(3.0, 5.0), windows_from_offboard=True)
     from dataclasses import replace
@@ -33,11 +37,16 @@ def test_loss_and_blackout_end_in_the_requested_hold_not_rtl(tmp_path, seed: int
     speed = np.linalg.norm(np.diff(truth.position_ned_m, axis=0), axis=1) / np.maximum(np.diff(truth.time_s), 1e-9)
     log = entries(tmp_path / "log")
     requests = [e for e in log if e.direction == "out" and is_mode_request(e.message) and e.message.param2 == 4]
+    assert during.any(), f"the flight ended before the blackout: {outcome.reason}"
     print(f"\nseed {seed}: {outcome.reason} (exit {outcome.exit_code}); modes seen {sorted(set(truth.mode))}; "
           f"end {last_heartbeat_mode(tmp_path / 'log', 'px4')}; {len(requests)} hold requests; max speed after the blackout began "
           f"{speed[during[1:]].max():.2f} m/s")  # fmt: skip
     assert outcome.exit_code == 3, outcome.reason
-    assert "state went stale" in outcome.reason and "AUTO.LOITER requested, confirmed" in outcome.reason
+    # Which watchdog fires first depends on the random loss: the stale-state one (0.5 s) or, when
+    # the loss also ate the 1 Hz HEARTBEATs either side of the blackout, the HEARTBEAT one (3 s).
+    # Either must end the same way: the hold requested and confirmed.
+    assert "state went stale" in outcome.reason or "no HEARTBEAT from the autopilot" in outcome.reason, outcome.reason
+    assert "AUTO.LOITER requested, confirmed" in outcome.reason, outcome.reason
     assert last_heartbeat_mode(tmp_path / "log", "px4") == "AUTO.LOITER" and truth.armed[-1]
     assert "AUTO.RTL" not in truth.mode  # PX4's offboard-loss failsafe never fired
     assert speed[during[1:]].max() < 2.0  # nothing flown open loop
