@@ -1,6 +1,7 @@
-"""A vehicle that comes down mid-flight: from t = 3 s every motor gives only 45 % of its full
-thrust (a sagging battery, damaged propellers; thrust-to-weight 3.5 -> 1.6, too little to hold
-height at the path's tilts). It sinks whatever it is commanded, touches down and is disarmed by
+"""A vehicle that comes down mid-flight: from t = 3 s every motor gives only 45 % of the thrust
+it is commanded (a sagging battery, damaged propellers). The autopilot's hover thrust is then far
+too low and the most the app's bounded thrust command can get out of it (about 1.15 g) cannot hold
+height at the path's tilts. It sinks whatever it is commanded, touches down and is disarmed by
 the autopilot (the mock's touchdown faster than 3 m/s is a crash). The floor is put below the
 ground for this test so that the fence does not end the flight first. The app ends within 1 s of
 the touchdown with exit 6 and sends nothing after it (no setpoint, no mode request to a disarmed
