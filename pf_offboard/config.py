@@ -29,6 +29,9 @@ OUTPUT_MODES = ("acceleration", "attitude", "rates")
 END_ACTIONS = ("hold", "land")
 FRAMES = ("enu", "ned")
 MOVING_FRAMES = ("auto", "frenet", "rmf")
+# path_following: the paper's time-invariant controller (PathFollower); trajectory_tracking: the
+# baseline that tracks the same spline timed at constant speed (TrajectoryTracker)
+CONTROLLERS = ("path_following", "trajectory_tracking")
 
 
 @dataclass(frozen=True)
@@ -108,6 +111,7 @@ class Config:
     gains_auto: bool = False  # gains derived from the vehicle model (gains: auto or no gains section)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     source: str = "<config>"
+    controller: str = "path_following"  # one of CONTROLLERS (pf_offboard.control.select)
 
     @property
     def needs_origin(self) -> bool:
@@ -515,7 +519,7 @@ def _safety(data: Any) -> SafetyConfig:
     )
 
 
-TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle", "compensation", "safety")
+TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle", "compensation", "safety", "controller")
 
 
 def parse_config(data: Any, source: str = "<config>") -> Config:
@@ -558,6 +562,7 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
         vehicle=vehicle,
         safety=_safety(d.get("safety")),
         source=source,
+        controller=_choice(d, "controller", "controller", "path_following", CONTROLLERS),
     )
 
 

@@ -111,6 +111,8 @@ class Autopilot:
         else:
             dyn_spawn = Spawn.ground(spawn.position_ned_m)
         self.sim = Simulator(vehicle, rng_dyn, dyn_spawn, wind=config.wind())
+        for push in config.pushes:
+            self.sim.add_push(push)
         self.truth: VehicleState = self.sim.state()
         self._position_sp_cache: tuple[object, PositionSetpoint | None] = (None, None)
         self._estimate_cache: tuple[object, int, tuple[np.ndarray, np.ndarray, float]] = (None, -1, (np.zeros(3), np.zeros(3), 0.0))

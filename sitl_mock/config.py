@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sitl_mock.dynamics import DEFAULT_VEHICLE, PRESET_NAMES, Wind
+from sitl_mock.dynamics import DEFAULT_VEHICLE, PRESET_NAMES, Push, Wind
 from sitl_mock.profiles import PROFILES
 
 MAX_WIND_M_S = 20.0  # beyond what a small multicopter flies in (and the tilt limits allow)
@@ -195,6 +195,8 @@ class MockConfig:
     wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     wind_gust_std_m_s: float = 0.0
     wind_gust_time_constant_s: float = 2.0
+    # External pushes (sitl_mock.dynamics.Push: start, duration, specific force NED m/s^2).
+    pushes: tuple[Push, ...] = ()
     # MAVLink 2 signing key file (32 raw bytes, 64 hex digits or a passphrase; sitl_mock.signing):
     # sign everything sent, drop unsigned / wrongly signed frames. None: no signing.
     signing_key_file: str | None = None
@@ -214,6 +216,9 @@ class MockConfig:
         if not (math.isfinite(self.wind_gust_time_constant_s) and 0.05 <= self.wind_gust_time_constant_s <= 600.0):
             raise MockConfigError("wind_gust_time_constant_s",
                                   f"must be in [0.05, 600] s, got {self.wind_gust_time_constant_s}")
+        for i, push in enumerate(self.pushes):
+            if not isinstance(push, Push):
+                raise MockConfigError(f"pushes[{i}]", f"expected a sitl_mock.dynamics.Push, got {push!r}")
         if not (math.isfinite(self.speed) and self.speed > 0):
             raise MockConfigError("speed", f"must be > 0, got {self.speed}")
         for name in ("lockstep_dt_s", "physics_dt_s", "step_dt_s"):

@@ -273,13 +273,13 @@ async def _fly(
     from pf_offboard.app.link import Link
     from pf_offboard.app.pipeline import Pipeline
     from pf_offboard.app.profiles import Autopilot, output_mode_refusal, select_profile
-    from pf_offboard.control import PathFollower
+    from pf_offboard.control import controller_from_config
     from pf_offboard.logs.flightlog import FlightLog
     from pf_offboard.logs.summary import SummaryAccumulator
     from pf_offboard.safety import EnvelopeMonitor, SafetyConfig
 
     # a path in latitude / longitude is built once the vehicle's origin is known (below)
-    follower = PathFollower.from_config(config) if config.path.geodetic is None else None
+    follower = controller_from_config(config) if config.path.geodetic is None else None
     link = Link.open(endpoint, signing_key=signing_key)
     # state that waited in the socket longer than the state timeout is never flown
     link.max_state_age_s = settings.state_timeout_s
@@ -310,7 +310,7 @@ async def _fly(
 
             config = await localise_config(link, config, stream)
             flight_log.write_config(args.config, config)
-            follower = PathFollower.from_config(config)
+            follower = controller_from_config(config)
         assert follower is not None
 
         launch = "takeoff" if args.takeoff is not None else "throw" if args.throw is not None else "airborne"

@@ -47,7 +47,9 @@ class Pipeline:
     """Estimator → core → encoder, stepped once per fresh state sample.
 
     ``follower`` is a :class:`pf_offboard.control.PathFollower` (anything with
-    ``update(position_enu_m, velocity_enu_m_s) -> Command`` and ``reset()``).
+    ``update(position_enu_m, velocity_enu_m_s) -> Command`` and ``reset()``), or the
+    :class:`pf_offboard.control.TrajectoryTracker` baseline (``needs_time``: it gets each sample's
+    time and is reset on activation, when its schedule starts).
     """
 
     def __init__(self, follower: Any, encoder: Encoder, estimator: Estimator | None = None) -> None:
@@ -57,7 +59,7 @@ class Pipeline:
         self._stepped_sample = 0
         self.replaced_steps = 0  # steps where the safe hold was sent instead of the command
         # a follower with inner-loop compensation needs each sample's time (observer, predictor)
-        self._timed = getattr(follower, "compensator", None) is not None
+        self._timed = getattr(follower, "compensator", None) is not None or bool(getattr(follower, "needs_time", False))
         self._was_active = False
         speed = getattr(follower, "speed", math.nan)
         self.speed_ref_m_s = float(speed) if isinstance(speed, (int, float)) else math.nan

@@ -10,6 +10,8 @@ from pf_offboard.control.attitude import (
     AttitudeRates,
 )
 from pf_offboard.control.follower import PathFollower, evaluate_terms
+from pf_offboard.control.select import controller_from_config
+from pf_offboard.control.tracker import TrajectoryTracker
 from pf_offboard.control.transverse import ExactTerms, exact_terms
 from pf_offboard.control.types import (
     GRAVITY_M_S2,
@@ -33,9 +35,11 @@ __all__ = [
     "Limits",
     "PathFollower",
     "Saturation",
+    "TrajectoryTracker",
     "TransverseState",
     "VehicleModel",
     "YawSpec",
+    "controller_from_config",
     "evaluate_terms",
     "exact_terms",
 ]

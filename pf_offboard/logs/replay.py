@@ -233,7 +233,7 @@ def build_pipeline(
     from pf_offboard.app.fly import flight_settings
     from pf_offboard.app.pipeline import Pipeline
     from pf_offboard.app.profiles import select_profile
-    from pf_offboard.control import PathFollower
+    from pf_offboard.control import controller_from_config
 
     first = _first_step_setpoint(entries, records)
     if first is None:
@@ -265,7 +265,7 @@ def build_pipeline(
         max_body_rate_rad_s=config.safety.max_body_rate_rad_s if config.safety.enabled else None,  # as fly bounds them
     )  # fmt: skip
     if follower is None:
-        follower = PathFollower.from_config(config)
+        follower = controller_from_config(config)
     source = options.state_source or _state_source_of(entries)
     return Pipeline(follower, encoder, Estimator(source)), profile, output_mode, target_system
 

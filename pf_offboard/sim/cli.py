@@ -22,6 +22,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="constant wind, world ENU m/s (air velocity: 3,0 blows toward east at 3 m/s; U default 0)")
     parser.add_argument("--wind-gusts", metavar="STD[,TAU]",
                         help="random gusts on top of --wind: std m/s per axis, time constant s (default 2); seeded by --seed")
+    parser.add_argument("--push", metavar="T,DURATION,AX,AY[,AZ]",
+                        help="an external push: from simulated time T s for DURATION s, specific force AX,AY,AZ m/s^2 "
+                        "world ENU (AZ default 0), e.g. 8,0.5,-10,0")
     parser.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: config)")
     parser.add_argument("--rate", type=float, metavar="HZ", help="control/telemetry rate (default: config flight.setpoint_rate_hz)")
     end = parser.add_mutually_exclusive_group()
@@ -39,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
 
     from pf_offboard.errors import InputError
     from pf_offboard.logs._io import make_dir
-    from pf_offboard.sim.flight import SimSpec, parse_gusts, parse_start, parse_throw, parse_wind, simulate
+    from pf_offboard.sim.flight import SimSpec, parse_gusts, parse_push, parse_start, parse_throw, parse_wind, simulate
 
     from pf_offboard.shipped import resolve_config
 
@@ -52,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
         vehicle=args.vehicle,
         wind_enu_m_s=parse_wind(args.wind) if args.wind is not None else None,
         wind_gusts=parse_gusts(args.wind_gusts) if args.wind_gusts is not None else None,
+        push=parse_push(args.push) if args.push is not None else None,
         output_mode=args.output,
         rate_hz=args.rate,
         duration_s=args.duration,

@@ -60,6 +60,9 @@ class SimSpec:
     vehicle: str = "fast"  # a sitl_mock.dynamics preset (PRESET_NAMES); the CLI defaults to DEFAULT_VEHICLE
     wind_enu_m_s: tuple[float, float, float] | None = None  # constant wind, world ENU m/s (air velocity)
     wind_gusts: tuple[float, float] | None = None  # random gusts: (std m/s per axis, time constant s)
+    # an external push: (start s of simulated time, duration s, ax, ay, az m/s^2 world ENU), a
+    # specific force on the airframe on top of thrust, gravity, drag and wind
+    push: tuple[float, float, float, float, float] | None = None
     output_mode: str | None = None  # default: config flight.output_mode
     rate_hz: float | None = None  # control / telemetry rate; default: config flight.setpoint_rate_hz
     duration_s: float | None = None  # simulated time from the start
@@ -128,26 +131,52 @@ def parse_throw(text: str) -> tuple[float, ...]:
 MAX_WIND_M_S = 20.0
 
 
-def parse_wind(text: str) -> tuple[float, float, float]:
-    """``E,N[,U]`` (world ENU, m/s) of a constant wind; U defaults to 0."""
+def _numbers(text: str, flag: str, counts: tuple[int, ...], expected: str) -> tuple[float, ...]:
+    """Comma-separated numbers of a flag, as many as one of ``counts``; else an error naming it."""
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
-        raise InputError("--wind", f"expected E,N or E,N,U in m/s, got {text!r}") from None
-    if len(values) not in (2, 3):
-        raise InputError("--wind", f"expected E,N or E,N,U in m/s, got {text!r}")
+        raise InputError(flag, f"expected {expected}, got {text!r}") from None
+    if len(values) not in counts:
+        raise InputError(flag, f"expected {expected}, got {text!r}")
+    return values
+
+
+def parse_wind(text: str) -> tuple[float, float, float]:
+    """``E,N[,U]`` (world ENU, m/s) of a constant wind; U defaults to 0."""
+    values = _numbers(text, "--wind", (2, 3), "E,N or E,N,U in m/s")
     return (values + (0.0,))[:3]  # type: ignore[return-value]
 
 
 def parse_gusts(text: str) -> tuple[float, float]:
     """``STD[,TAU]`` of the random gusts: std m/s per axis, time constant s (default 2)."""
-    try:
-        values = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise InputError("--wind-gusts", f"expected STD or STD,TAU, got {text!r}") from None
-    if len(values) not in (1, 2):
-        raise InputError("--wind-gusts", f"expected STD or STD,TAU, got {text!r}")
+    values = _numbers(text, "--wind-gusts", (1, 2), "STD or STD,TAU")
     return (values[0], values[1] if len(values) == 2 else 2.0)
+
+
+MAX_PUSH_M_S2 = 50.0
+MAX_PUSH_DURATION_S = 10.0
+
+
+def parse_push(text: str) -> tuple[float, float, float, float, float]:
+    """``T,DURATION,AX,AY[,AZ]``: a push from simulated time T (s) for DURATION (s) with the
+    specific force (AX, AY, AZ) m/s^2, world ENU (AZ default 0)."""
+    values = _numbers(text, "--push", (4, 5), "T,DURATION,AX,AY[,AZ] (s, s, m/s^2 ENU)")
+    push = (values + (0.0,))[:5]
+    _check_push(push)  # type: ignore[arg-type]
+    return push  # type: ignore[return-value]
+
+
+def _check_push(push: tuple[float, ...]) -> None:
+    if len(push) != 5 or not all(math.isfinite(v) for v in push):
+        raise InputError("--push", f"must be 5 finite numbers (T s, DURATION s, AX, AY, AZ m/s^2 ENU), got {push!r}")
+    t, duration, *accel = push
+    if t < 0.0:
+        raise InputError("--push", f"start T must be >= 0 s, got {t:g}")
+    if not 1e-3 <= duration <= MAX_PUSH_DURATION_S:
+        raise InputError("--push", f"DURATION must be in [0.001, {MAX_PUSH_DURATION_S:g}] s, got {duration:g}")
+    if math.hypot(*accel) > MAX_PUSH_M_S2:
+        raise InputError("--push", f"acceleration must be <= {MAX_PUSH_M_S2:g} m/s^2, got {math.hypot(*accel):.3g}")
 
 
 def _check(spec: SimSpec) -> None:
@@ -169,6 +198,8 @@ def _check(spec: SimSpec) -> None:
             raise InputError("--wind-gusts", f"std must be in [0, {MAX_WIND_M_S / 2:g}] m/s, got {std}")
         if not (math.isfinite(tau) and 0.05 <= tau <= 600.0):
             raise InputError("--wind-gusts", f"time constant must be in [0.05, 600] s, got {tau}")
+    if spec.push is not None:
+        _check_push(tuple(spec.push))
     if spec.start_enu_m is not None and spec.throw_enu is not None:
         raise InputError("--throw", "give either --start (hover) or --throw, not both")
     if spec.duration_s is not None and not (math.isfinite(spec.duration_s) and 0.0 < spec.duration_s <= 3600.0):
@@ -215,7 +246,7 @@ class SimFlight:
         from pf_offboard.app.pipeline import Pipeline
         from pf_offboard.app.profiles import PROFILES
         from pf_offboard.config import load_config
-        from pf_offboard.control import PathFollower
+        from pf_offboard.control import controller_from_config
 
         _check(spec)
         self.spec = spec
@@ -229,7 +260,7 @@ class SimFlight:
         if not 20.0 <= rate <= MAX_RATE_HZ:
             raise InputError("flight.setpoint_rate_hz", f"sim needs 20..{MAX_RATE_HZ:g} Hz, got {rate} (or pass --rate)")
         self.dt_s = 1.0 / rate
-        follower = PathFollower.from_config(config)
+        follower = controller_from_config(config)
         self.path = follower.path
         self.profile = PROFILES[spec.autopilot]
         encoder = Encoder(
@@ -271,14 +302,19 @@ class SimFlight:
             if start[2] <= 0.2:
                 raise InputError("--start", f"the path starts at z = {start[2]:.2f} m; give --start above the ground")
             spawn = SpawnSpec("hover", tuple(map(float, frames.enu_to_ned(start))))  # type: ignore[arg-type]
-        wind: dict[str, Any] = {}
+        disturbances: dict[str, Any] = {}
         if spec.wind_enu_m_s is not None:
-            wind["wind_ned_m_s"] = tuple(map(float, frames.enu_to_ned(spec.wind_enu_m_s)))
+            disturbances["wind_ned_m_s"] = tuple(map(float, frames.enu_to_ned(spec.wind_enu_m_s)))
         if spec.wind_gusts is not None:
-            wind["wind_gust_std_m_s"], wind["wind_gust_time_constant_s"] = spec.wind_gusts
+            disturbances["wind_gust_std_m_s"], disturbances["wind_gust_time_constant_s"] = spec.wind_gusts
+        if spec.push is not None:
+            from sitl_mock.dynamics import Push
+
+            t, duration, *accel = spec.push
+            disturbances["pushes"] = (Push(t, duration, tuple(map(float, frames.enu_to_ned(accel)))),)  # type: ignore[arg-type]
         mock = MockConfig(
             profile=spec.autopilot, vehicle=spec.vehicle, spawn=spawn, seed=spec.seed,
-            lockstep=True, lockstep_dt_s=self.dt_s, step_dt_s=self.dt_s, ekf_ready_delay_s=0.0, **wind,
+            lockstep=True, lockstep_dt_s=self.dt_s, step_dt_s=self.dt_s, ekf_ready_delay_s=0.0, **disturbances,
         )  # fmt: skip
         ap = Autopilot(mock, np.random.default_rng(spec.seed))
         ap.add_link(0)

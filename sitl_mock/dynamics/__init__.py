@@ -25,6 +25,7 @@ from .types import (
     Gust,
     MotorsOff,
     PositionSetpoint,
+    Push,
     RateSetpoint,
     SensorNoise,
     Setpoint,
@@ -37,7 +38,7 @@ from .types import (
 
 __all__ = [
     "DEFAULT_VEHICLE", "GRAVITY_M_S2", "PHYSICS_DT_S", "PHYSICS_RATE_HZ", "PRESET_NAMES", "REALISTIC_VEHICLE",
-    "AccelerationSetpoint", "AttitudeSetpoint", "CascadeGains", "EstimatorNoise", "Gust", "MotorsOff", "PositionSetpoint",
+    "AccelerationSetpoint", "AttitudeSetpoint", "CascadeGains", "EstimatorNoise", "Gust", "MotorsOff", "PositionSetpoint", "Push",
     "RateSetpoint", "SensorNoise", "Setpoint", "Simulator", "Spawn", "VehicleParams", "VehicleState", "Wind",
     "cascade_gains_for_poles", "euler_to_quat", "preset", "quat_mul", "quat_to_euler",
 ]

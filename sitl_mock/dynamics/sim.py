@@ -7,6 +7,8 @@ the acceleration mapping / position controller above it) at ``params.attitude_lo
 The hot loop is plain Python floats in local variables — a numpy call costs about a
 microsecond, the whole 1 kHz step has a budget of a few.
 
+External pushes (:meth:`Simulator.add_push`) add a specific force to the translation.
+
 Integration (per 1 ms substep): motors — exact zero-order-hold discretisation of the first-order
 lag; translation — exact solution of dv/dt = u − c·(v − w) for the substep's thrust + gravity u
 and wind w (so free fall and ballistic flight, with or without drag, carry no integrator error
@@ -29,6 +31,7 @@ from .types import (
     AttitudeSetpoint,
     MotorsOff,
     PositionSetpoint,
+    Push,
     RateSetpoint,
     SensorNoise,
     Setpoint,
@@ -148,6 +151,9 @@ class Simulator:
         self._normals: list[float] = []
         self._wind_now = (0.0, 0.0, 0.0)
         self.set_wind(wind if wind is not None else Wind())
+        # External pushes (add_push): the specific force acting now, constant between boundaries.
+        self._pushes: list[Push] = []
+        self._push_now = (0.0, 0.0, 0.0)
         # Sensors.
         self._noise = noise if noise is not None else SensorNoise()
         if not isinstance(self._noise, SensorNoise):
@@ -199,7 +205,7 @@ class Simulator:
         if self._latency_ticks == 0:
             self._select(setpoint)
             if target > self._ticks:
-                self._run(target - self._ticks)
+                self._run_pushed(target - self._ticks)
         else:
             pending = self._pending_sp
             pending.append((self._ticks + self._latency_ticks, setpoint))
@@ -209,7 +215,7 @@ class Simulator:
                 if self._ticks >= target:
                     break
                 stop = min(target, pending[0][0]) if pending else target
-                self._run(stop - self._ticks)
+                self._run_pushed(stop - self._ticks)
         if self._est is not None:
             self._est.advance_to(self._ticks * PHYSICS_DT_S)
 
@@ -320,6 +326,13 @@ class Simulator:
         self._added_gusts.append(gust)
         self._gusts.append(gust)
         self._update_wind()
+
+    def add_push(self, push: Push) -> None:
+        """Schedule an external push (a constant specific force over a time window, see
+        :class:`Push`). Its start and end are rounded to the 1 ms physics tick."""
+        if not isinstance(push, Push):
+            raise ValueError(f"Simulator.add_push.push: expected a Push, got {type(push).__name__}")
+        self._pushes.append(push)
 
     # ------------------------------------------------------------------------------------------
     # Setup
@@ -579,6 +592,28 @@ class Simulator:
     # The 1 kHz loop
     # ------------------------------------------------------------------------------------------
 
+    def _run_pushed(self, n: int) -> None:
+        """``_run(n)`` in pieces over which the pushes' sum is constant (the hot loop reads it once)."""
+        if not self._pushes:
+            self._run(n)
+            return
+        end = self._ticks + n
+        while self._ticks < end:
+            tick = self._ticks
+            fx = fy = fz = 0.0
+            nxt = end
+            for p in self._pushes:
+                on = int(round(p.start_s * PHYSICS_RATE_HZ))
+                off = int(round((p.start_s + p.duration_s) * PHYSICS_RATE_HZ))
+                if on <= tick < off:
+                    fx, fy, fz = fx + p.accel_ned_m_s2[0], fy + p.accel_ned_m_s2[1], fz + p.accel_ned_m_s2[2]
+                for b in (on, off):
+                    if tick < b < nxt:
+                        nxt = b
+            self._push_now = (fx, fy, fz)
+            self._run(nxt - tick)
+        self._push_now = (0.0, 0.0, 0.0)
+
     def _run(self, n: int) -> None:
         pr = self.params
         dt = PHYSICS_DT_S
@@ -622,6 +657,8 @@ class Simulator:
         countdown = self._countdown
         wind_dynamic = self._wind_dynamic
         wnx, wny, wnz = self._wind_now
+        pux, puy, puz = self._push_now
+        pushing = pux != 0.0 or puy != 0.0 or puz != 0.0
         crashed = self._crashed
         landed = self._landed
         rsx, rsy, rsz, cc = self._rs
@@ -770,6 +807,10 @@ class Simulator:
             ux = -f * c2x
             uy = -f * c2y
             uz = g - f * c2z
+            if pushing:
+                ux += pux
+                uy += puy
+                uz += puz
             rx_ = vx - wnx
             ry_ = vy - wny
             rz_ = vz - wnz
@@ -813,7 +854,7 @@ class Simulator:
                 pz = 0.0
                 if vz > 0.0:
                     vz = 0.0
-                normal = g - f * c2z  # specific normal force needed to stay on the ground
+                normal = uz  # specific normal force needed to stay on the ground
                 if normal > 0.0:
                     landed = True
                     sh = math.sqrt(vx * vx + vy * vy)

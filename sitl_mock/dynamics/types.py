@@ -221,6 +221,27 @@ class Gust:
 
 
 @dataclass(frozen=True)
+class Push:
+    """An external push: a constant specific force ``accel_ned_m_s2`` (force / mass, m/s², world
+    NED) on the airframe from ``start_s`` for ``duration_s`` seconds of simulated time (a shove, a
+    collision, a downwash). It acts on the translation only, on top of thrust, gravity and drag."""
+
+    start_s: float
+    duration_s: float
+    accel_ned_m_s2: Vec3
+
+    def __post_init__(self) -> None:
+        _set(self, "start_s", _num("Push", "start_s", self.start_s, 0.0))
+        _set(self, "duration_s", _num("Push", "duration_s", self.duration_s, 1e-3, 3600.0))
+        _set(self, "accel_ned_m_s2", _vec("Push", "accel_ned_m_s2", self.accel_ned_m_s2))
+        if math.sqrt(sum(a * a for a in self.accel_ned_m_s2)) > MAX_PUSH_M_S2:
+            raise ValueError(f"Push.accel_ned_m_s2: must be <= {MAX_PUSH_M_S2:g} m/s^2, got {self.accel_ned_m_s2}")
+
+
+MAX_PUSH_M_S2 = 100.0  # about 10 g: beyond it the airframe would not survive the push
+
+
+@dataclass(frozen=True)
 class Wind:
     """Mean wind + scheduled gusts + optional turbulence (first-order Gauss–Markov per axis,
     drawn from the simulator's Generator). Air velocity in world NED."""
