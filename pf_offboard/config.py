@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from pf_offboard.control.profile import SpeedProfileSpec
 from pf_offboard.control.types import GRAVITY_M_S2, MIN_THRUST_FLOOR_M_S2, Gains, Limits, VehicleModel, YawSpec
 from pf_offboard.errors import ConfigError, InputError
 from pf_offboard.frames import ned_to_enu, yaw_ned_to_enu, yaw_rate_ned_to_enu
@@ -112,6 +113,8 @@ class Config:
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     source: str = "<config>"
     controller: str = "path_following"  # one of CONTROLLERS (pf_offboard.control.select)
+    speed_profile: SpeedProfileSpec | None = None  # None: the constant speed_m_s (the paper)
+    feedforward: str = "on_path"  # body-rate feed-forward: on_path (the paper) | any_state
 
     @property
     def needs_origin(self) -> bool:
@@ -230,13 +233,13 @@ def _pairs(value: Any, name: str, width: int) -> list[list[float]]:
 
 
 # ---------------------------------------------------------------------------------- sections
-def _build_path(waypoints: tuple[tuple[float, float, float], ...], closed: bool, moving: str) -> None:
+def _build_path(waypoints: tuple[tuple[float, float, float], ...], closed: bool, moving: str) -> Any:
     # Build the path once so that every geometric problem (duplicates, too few points, a spline
     # that doubles back, frenet on a straight piece) is reported at load time, named in config terms.
     from pf_offboard.path import Path
 
     try:
-        Path.from_waypoints(waypoints, closed=closed, frame=moving)
+        return Path.from_waypoints(waypoints, closed=closed, frame=moving)
     except InputError as exc:
         fld = exc.field if exc.field.startswith("path.") else f"path.{exc.field}"
         raise ConfigError(fld, exc.reason) from None
@@ -519,7 +522,35 @@ def _safety(data: Any) -> SafetyConfig:
     )
 
 
-TOP_LEVEL = ("path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle", "compensation", "safety", "controller")
+TOP_LEVEL = (
+    "path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle", "compensation", "safety", "speed_profile",
+    "feedforward", "controller",
+)  # fmt: skip
+FEEDFORWARD_MODES = ("on_path", "any_state")
+
+
+def _speed_profile(data: Any) -> SpeedProfileSpec | None:
+    """``speed_profile:`` section (absent or null: the constant ``speed_m_s``)."""
+    if data is None:
+        return None
+    keys = ("max_speed_m_s", "table", "max_tangential_accel_m_s2", "max_tangential_jerk_m_s3", "accel_share")
+    d = _section(data, "speed_profile", keys)
+    if "max_speed_m_s" not in d:
+        raise ConfigError("speed_profile.max_speed_m_s", "missing (required in a speed_profile section)")
+    default = SpeedProfileSpec(1.0)
+    vals = {
+        "max_speed_m_s": _number(d, "max_speed_m_s", "speed_profile.max_speed_m_s", None, 0.05, MAX_SPEED_M_S),
+        "max_tangential_accel_m_s2": _number(d, "max_tangential_accel_m_s2", "speed_profile.max_tangential_accel_m_s2",
+                                             default.max_tangential_accel_m_s2, 0.05, 50.0),
+        "max_tangential_jerk_m_s3": _number(d, "max_tangential_jerk_m_s3", "speed_profile.max_tangential_jerk_m_s3",
+                                            default.max_tangential_jerk_m_s3, 0.1, 1000.0),
+        "accel_share": _number(d, "accel_share", "speed_profile.accel_share", default.accel_share, 0.05, 1.0),
+    }  # fmt: skip
+    table = _pairs(d["table"], "speed_profile.table", 2) if d.get("table") is not None else []
+    try:
+        return SpeedProfileSpec(table_eta1_m_speed_m_s=tuple((a, b) for a, b in table), **vals)  # type: ignore[arg-type]
+    except InputError as exc:
+        raise ConfigError(exc.field, exc.reason) from None
 
 
 def parse_config(data: Any, source: str = "<config>") -> Config:
@@ -550,6 +581,12 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
         raise ConfigError("gains", f"must be 'auto' or a mapping (transversal, tangential), got {raw_gains!r}")
     else:
         gains = _gains(raw_gains)
+    profile = _speed_profile(d.get("speed_profile"))
+    table = profile.table_eta1_m_speed_m_s if profile is not None else ()
+    if table and path.closed and path.waypoints_enu_m:
+        length = _build_path(path.waypoints_enu_m, path.closed, path.moving_frame).length_m
+        if table[-1][0] >= table[0][0] + length:
+            raise ConfigError("speed_profile.table", f"eta1 values must span less than one lap ({length:.3f} m) on a closed path")
     return Config(
         path=path,
         speed_m_s=speed,
@@ -563,6 +600,8 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
         safety=_safety(d.get("safety")),
         source=source,
         controller=_choice(d, "controller", "controller", "path_following", CONTROLLERS),
+        speed_profile=profile,
+        feedforward=_choice(d, "feedforward", "feedforward", "on_path", FEEDFORWARD_MODES),
     )
 
 

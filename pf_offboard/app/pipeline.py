@@ -63,6 +63,8 @@ class Pipeline:
         self._was_active = False
         speed = getattr(follower, "speed", math.nan)
         self.speed_ref_m_s = float(speed) if isinstance(speed, (int, float)) else math.nan
+        # with a speed profile the reference varies along the path: log each step's eta2_ref
+        self._profiled = getattr(follower, "profile", None) is not None
 
     def on_message(self, msg: Any) -> bool:
         """Feed one received message; True if it brought a fresh state sample."""
@@ -140,7 +142,7 @@ class Pipeline:
             phi1_m=float(st.phi1),
             phi2_m_s=float(st.phi2),
             cross_track_m=float(cmd.cross_track_m),
-            speed_ref_m_s=self.speed_ref_m_s,
+            speed_ref_m_s=float(cmd.eta2_ref_m_s) if self._profiled else self.speed_ref_m_s,
             accel_cmd_enu_m_s2=np.asarray(cmd.acceleration, dtype=float),
             thrust_cmd_m_s2=float(cmd.thrust),
             q_cmd_enu_flu=np.asarray(cmd.attitude, dtype=float),

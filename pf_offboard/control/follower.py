@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import os
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -21,7 +21,8 @@ from pf_offboard.control.feedforward import (
     onpath_derivatives,
     quaternion_from_axes,
 )
-from pf_offboard.control.law import ControlLaw, LawOutput
+from pf_offboard.control.law import BISECTION_STEPS, ControlLaw, LawOutput
+from pf_offboard.control.profile import SpeedProfile, SpeedProfileSpec
 from pf_offboard.control.transverse import ExactTerms, exact_terms
 from pf_offboard.control.types import (
     GRAVITY_M_S2,
@@ -55,6 +56,26 @@ END_BLEND_M = 0.05
 # FAR_OUTER_M the Cartesian approach law is used, within FAR_INNER_M the exact law, a blend between.
 FAR_INNER_M = 0.5
 FAR_OUTER_M = 1.0
+# Any-state feed-forward: time step (s) of the central difference along the closed-loop flow,
+# the allocation's bisection steps there (2^-40: smooth to rounding), and the cap on |jerk| / |f|
+# (1/s, i.e. a tilt rate) where the law has a jump (projection branch switch far from the path).
+ANY_STATE_STEP_S = 5e-5
+FINE_BISECTION_STEPS = 40
+ANY_STATE_MAX_JERK_RATIO = 50.0
+FEEDFORWARD_MODES = ("on_path", "any_state")
+
+
+class _Evaluation(NamedTuple):
+    state: TransverseState
+    eta2_ref: float
+    deta2_ref: float
+    ddeta2_ref: float
+    w: float  # weight of the approach fallback
+    res: LawOutput
+    tan: Vec
+    s_ss: Vec
+    s_sss: Vec
+    dist: float
 
 
 def evaluate_terms(path: Path, lam: float, position: ArrayLike, velocity: ArrayLike) -> ExactTerms:
@@ -115,6 +136,8 @@ class PathFollower:
         limits: Limits | None = None,
         projector: Any = None,
         compensator: InnerLoopCompensator | None = None,
+        speed_profile: SpeedProfileSpec | None = None,
+        feedforward: str = "on_path",
     ) -> None:
         try:
             speed = float(speed)
@@ -141,6 +164,11 @@ class PathFollower:
 
             self._measured_projector = Projector(path)
         self.law = ControlLaw(self.gains, self.limits)
+        if feedforward not in FEEDFORWARD_MODES:
+            raise InputError("feedforward", f"must be one of {', '.join(FEEDFORWARD_MODES)}, got {feedforward!r}")
+        self.feedforward = feedforward
+        # eta2_ref(eta1) from a speed profile (None: the constant ``speed``, as in the paper)
+        self.profile = SpeedProfile(path, speed_profile, self.limits, speed) if speed_profile is not None else None
         self._yaw = YawProfile(self.yaw, path.length_m, path.closed, speed)
         self._closed = bool(path.closed)
         self._lam_max = float(path.lam_max)
@@ -166,7 +194,10 @@ class PathFollower:
                 speed_integral_rad_s=c.integral_rad_s,
                 offset_integral_rad_s=c.integral_rad_s,
             )
-        return cls(path, cfg.speed_m_s, gains=cfg.gains, yaw=cfg.yaw, limits=cfg.limits, compensator=comp)
+        return cls(
+            path, cfg.speed_m_s, gains=cfg.gains, yaw=cfg.yaw, limits=cfg.limits, compensator=comp,
+            speed_profile=cfg.speed_profile, feedforward=cfg.feedforward,
+        )  # fmt: skip
 
     def reset(self) -> None:
         """Forget the projection warm start and the compensator's state (activation, estimator
@@ -197,12 +228,166 @@ class PathFollower:
 
     # ------------------------------------------------------------------ control
     def reference_speed(self, eta1: float) -> float:
-        """eta2_ref at arclength eta1: ``speed``, slowed down to stop at the end of an open path."""
+        """eta2_ref at arclength eta1: ``speed`` (or the speed profile), slowed down to stop at the
+        end of an open path."""
+        if self.profile is not None:
+            return self.reference(eta1)[0]
         if self._closed:
             return self.speed
         ahead = self._length - eta1 if self.speed > 0.0 else eta1
         stop = self.law.stopping_speed(ahead)
         return self.speed if abs(self.speed) <= stop else math.copysign(stop, self.speed)
+
+    def reference(self, eta1: float) -> tuple[float, float, float]:
+        """(eta2_ref m/s, d eta2_ref / d eta1 1/s, d2 eta2_ref / d eta1^2 1/(m s)) at arclength eta1.
+
+        Without a speed profile: ``speed`` (slowed down at an open path's end) and zero
+        derivatives, exactly the constant-speed law. With one: the profile, and on an open path
+        the law's stopping speed where that is lower (with its derivatives)."""
+        if self.profile is None:
+            return self.reference_speed(eta1), 0.0, 0.0
+        e, de, dde = self.profile.evaluate(eta1)
+        if self._closed:
+            return e, de, dde
+        sign = 1.0 if self.speed > 0.0 else -1.0
+        ahead = self._length - eta1 if sign > 0.0 else eta1
+        stop = self.law.stopping_speed(ahead)
+        if stop >= abs(e):
+            return e, de, dde
+        if ahead <= 0.0:
+            return 0.0, 0.0, 0.0
+        # d/d eta1 = -sign d/d ahead; linear k d or braking sqrt(2 a d) (law.stopping_speed)
+        lin = self.law.k_pos_t * ahead
+        if lin <= stop:
+            return sign * stop, -self.law.k_pos_t, 0.0
+        a_dec = self.law.a_dec
+        return sign * stop, -a_dec / stop, sign * -a_dec * a_dec / stop**3
+
+    def _evaluate(
+        self, y: Vec, v: Vec, lam: float, s: tuple[float, ...], terms: ExactTerms,
+        offsets: tuple[float, float, float] | None, bisection_steps: int | None = None,
+    ) -> _Evaluation:  # fmt: skip
+        """The law's acceleration (before the compensator) at one state and closest point: the
+        map a_des(x) whose derivative along the closed-loop flow is the any-state feed-forward."""
+        st = terms.state
+        eta2_ref, deta2, ddeta2 = self.reference(st.eta1)
+        # blend weight of the approach fallback
+        r = (y[0] - s[0], y[1] - s[1], y[2] - s[2])
+        dist = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+        w = (terms.tube - TUBE_INNER) / (TUBE_OUTER - TUBE_INNER)
+        w_far = (dist - FAR_INNER_M) / (FAR_OUTER_M - FAR_INNER_M)
+        if w_far > w:
+            w = w_far
+        past_end = False
+        if not self._closed and (lam <= 0.0 or lam >= self._lam_max):
+            out = terms.tangential_offset_m if lam > 0.0 else -terms.tangential_offset_m
+            if out > 0.0:
+                # beyond the end we travel towards: stop at the end point; beyond the start:
+                # join at the start and go on (the approach law keeps eta2_ref along t)
+                past_end = (lam > 0.0) == (self.speed > 0.0)
+                w = max(w, out / END_BLEND_M)
+        w = 0.0 if w <= 0.0 else (1.0 if w >= 1.0 else w)
+        law = self.law
+        eta2_ref_law = eta2_ref
+        if offsets is not None and w < 1.0:
+            # integral action as reference offsets: the law's limits and shaping act unchanged
+            b_eta2, b_xi1, b_phi1 = offsets
+            eta2_ref_law = eta2_ref + b_eta2
+            terms = terms._replace(state=st._replace(xi1=st.xi1 + b_xi1, phi1=st.phi1 + b_phi1))
+        tube: LawOutput | None = None
+        if w < 1.0:
+            # speed profile: the tangential feed-forward d(eta2_ref)/dt = eta2_ref'(eta1) eta2
+            tube = law.tube(terms, eta2_ref_law, deta2 * st.eta2, bisection_steps or BISECTION_STEPS)
+        if tube is None:
+            w = 1.0
+        # unit tangent and arclength derivatives at lam* (approach law, yaw, jerk feed-forward)
+        tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
+        if w > 0.0:
+            app = law.approach(r, v, tan, 0.0 if past_end else eta2_ref)
+            if tube is None:
+                res = app
+            else:
+                k = 1.0 - w
+                res = LawOutput(
+                    (
+                        k * tube.accel[0] + w * app.accel[0],
+                        k * tube.accel[1] + w * app.accel[1],
+                        k * tube.accel[2] + w * app.accel[2],
+                    ),
+                    tube.tangential or app.tangential,
+                    tube.transversal or app.transversal,
+                    tube.approach_speed or app.approach_speed,
+                )
+        else:
+            assert tube is not None
+            res = tube
+        return _Evaluation(st, eta2_ref, deta2, ddeta2, w, res, tan, s_ss, s_sss, dist)
+
+    def _onpath_jerk(self, ev: _Evaluation) -> Vec:
+        """d/dt of the on-path acceleration at eta2_ref(eta1) (m/s^3), faded out with the fallback
+        weight. Constant speed E: sigma_sss E^3 (eqs. 25-27); with a profile E(eta1) also
+        ``3 sigma_ss E^2 E' + t E (E'' E + E'^2)``."""
+        e, w, s_sss = ev.eta2_ref, ev.w, ev.s_sss
+        k3 = (1.0 - w) * e * e * e
+        jerk = (s_sss[0] * k3, s_sss[1] * k3, s_sss[2] * k3)
+        if self.profile is None:
+            return jerk
+        de, dde = ev.deta2_ref, ev.ddeta2_ref
+        k2 = (1.0 - w) * 3.0 * e * e * de
+        k1 = (1.0 - w) * e * (dde * e + de * de)
+        t, ss = ev.tan, ev.s_ss
+        return (jerk[0] + ss[0] * k2 + t[0] * k1, jerk[1] + ss[1] * k2 + t[1] * k1, jerk[2] + ss[2] * k2 + t[2] * k1)
+
+    def _local_terms(self, lam0: float, y: Vec, v: Vec) -> tuple[float, tuple[float, ...], ExactTerms]:
+        """Closest point near ``lam0`` by Newton on <sigma', sigma - y> = 0 (no projector state)
+        and the exact terms there; an open path's parameter stays clamped to [0, lam_max]."""
+        lam = lam0
+        ev = self._eval
+        clamped = not self._closed and (lam <= 0.0 or lam >= self._lam_max)
+        if not clamped:
+            for _ in range(3):
+                q = ev(lam)
+                rx, ry, rz = y[0] - q[0], y[1] - q[1], y[2] - q[2]
+                f = q[3] * rx + q[4] * ry + q[5] * rz
+                d = q[3] * q[3] + q[4] * q[4] + q[5] * q[5] - (q[6] * rx + q[7] * ry + q[8] * rz)
+                if d <= 0.0:
+                    break
+                lam += f / d
+            if not self._closed:
+                lam = 0.0 if lam < 0.0 else (self._lam_max if lam > self._lam_max else lam)
+        q = ev(lam)
+        (_, _, _), (e2, de2, dde2), (e3, de3, dde3) = self._jets(lam)
+        terms = exact_terms(
+            self._arclength(lam), q[0:3], q[3:6], q[6:9], q[9:12], e2, de2, dde2, e3, de3, dde3, y, v
+        )
+        return lam, q, terms
+
+    def _closed_loop_jerk(
+        self, y: Vec, v: Vec, lam: float, terms: ExactTerms, accel: Vec, offsets: tuple[float, float, float] | None
+    ) -> Vec:
+        """d/dt a_des along the closed-loop flow (y' = v, v' = a_des; the ideal inner loop) at
+        this state (m/s^3): a central directional derivative of the whole state feedback
+        (projection, exact terms, limits, blends) over +-ANY_STATE_STEP_S, the bisections of the
+        allocation refined so that the map is smooth. Capped at ANY_STATE_MAX_JERK_RATIO |f|
+        where the law is not differentiable (a branch switch of the projection far away)."""
+        h = ANY_STATE_STEP_S
+        ld = terms.lam_dot
+        out: list[Vec] = []
+        for sgn in (1.0, -1.0):
+            k = sgn * h
+            yp = (y[0] + k * v[0], y[1] + k * v[1], y[2] + k * v[2])
+            vp = (v[0] + k * accel[0], v[1] + k * accel[1], v[2] + k * accel[2])
+            lp, sp, tp = self._local_terms(lam + k * ld, yp, vp)
+            out.append(self._evaluate(yp, vp, lp, sp, tp, offsets, FINE_BISECTION_STEPS).res.accel)
+        inv = 0.5 / h
+        j = ((out[0][0] - out[1][0]) * inv, (out[0][1] - out[1][1]) * inv, (out[0][2] - out[1][2]) * inv)
+        n = math.sqrt(j[0] * j[0] + j[1] * j[1] + j[2] * j[2])
+        fz = accel[2] + G
+        cap = ANY_STATE_MAX_JERK_RATIO * math.sqrt(accel[0] * accel[0] + accel[1] * accel[1] + fz * fz)
+        if n > cap:
+            c = cap / n
+            j = (j[0] * c, j[1] * c, j[2] * c)
+        return j
 
     def update(self, position: ArrayLike, velocity: ArrayLike, time_s: float | None = None) -> Command:
         """One control step at position (m) and velocity (m/s), world ENU.
@@ -227,61 +412,19 @@ class PathFollower:
                 comp.reset()
                 y, v = y_meas, v_meas
         lam, s, terms = self._terms(y, v)
-        st = terms.state
-        eta2_ref = self.reference_speed(st.eta1)
-        # blend weight of the approach fallback
-        r = (y[0] - s[0], y[1] - s[1], y[2] - s[2])
-        dist = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-        w = (terms.tube - TUBE_INNER) / (TUBE_OUTER - TUBE_INNER)
-        w_far = (dist - FAR_INNER_M) / (FAR_OUTER_M - FAR_INNER_M)
-        if w_far > w:
-            w = w_far
-        past_end = False
-        if not self._closed and (lam <= 0.0 or lam >= self._lam_max):
-            out = terms.tangential_offset_m if lam > 0.0 else -terms.tangential_offset_m
-            if out > 0.0:
-                # beyond the end we travel towards: stop at the end point; beyond the start:
-                # join at the start and go on (the approach law keeps eta2_ref along t)
-                past_end = (lam > 0.0) == (self.speed > 0.0)
-                w = max(w, out / END_BLEND_M)
-        w = 0.0 if w <= 0.0 else (1.0 if w >= 1.0 else w)
+        offsets = comp.integral_offsets() if comp is not None else None
+        ev = self._evaluate(y, v, lam, s, terms, offsets)
+        st, eta2_ref, w, res, tan, s_ss = ev.state, ev.eta2_ref, ev.w, ev.res, ev.tan, ev.s_ss
+        dist = ev.dist
         law = self.law
-        eta2_ref_law = eta2_ref
-        if comp is not None and w < 1.0:
-            # integral action as reference offsets: the law's limits and shaping act unchanged
-            b_eta2, b_xi1, b_phi1 = comp.integral_offsets()
-            eta2_ref_law = eta2_ref + b_eta2
-            terms = terms._replace(state=st._replace(xi1=st.xi1 + b_xi1, phi1=st.phi1 + b_phi1))
-        tube: LawOutput | None = law.tube(terms, eta2_ref_law) if w < 1.0 else None
-        if tube is None:
-            w = 1.0
-        # unit tangent and arclength derivatives at lam* (approach law, yaw, jerk feed-forward)
-        tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
-        if w > 0.0:
-            app = law.approach(r, v, tan, 0.0 if past_end else eta2_ref)
-            if tube is None:
-                res = app
-            else:
-                k = 1.0 - w
-                res = LawOutput(
-                    (
-                        k * tube.accel[0] + w * app.accel[0],
-                        k * tube.accel[1] + w * app.accel[1],
-                        k * tube.accel[2] + w * app.accel[2],
-                    ),
-                    tube.tangential or app.tangential,
-                    tube.transversal or app.transversal,
-                    tube.approach_speed or app.approach_speed,
-                )
-        else:
-            assert tube is not None
-            res = tube
         ax, ay, az = res.accel
         # on-path jerk at eta2_ref (eqs. 25-27: jerk = sigma_sss eta2_ref^3), faded out with the
         # fallback weight (no on-path motion to anticipate far away): feed-forward of the body
         # rates and of the inner loop's lag
-        k3 = (1.0 - w) * eta2_ref * eta2_ref * eta2_ref
-        jerk = (s_sss[0] * k3, s_sss[1] * k3, s_sss[2] * k3)
+        jerk = self._onpath_jerk(ev)
+        jerk_rates = jerk
+        if self.feedforward == "any_state":
+            jerk_rates = self._closed_loop_jerk(y, v, lam, terms, res.accel, offsets)
         if comp is not None:
             # the setpoint that makes the identified vehicle fly res.accel, kept feasible; the
             # lag's phase is inverted along the path by leading with lag * jerk
@@ -299,7 +442,7 @@ class PathFollower:
         yaw_rate = dpsi * eta2
         axes = attitude_from_thrust(f, psi)
         q = quaternion_from_axes(*axes)
-        omega = body_rates(axes, thrust, jerk, yaw_rate)
+        omega = body_rates(axes, thrust, jerk_rates, yaw_rate)
         if not _finite((ax, ay, az), q, omega, (thrust, psi, yaw_rate)):  # last line of defence
             raise InputError("state", f"no finite command at position {list(y)}, velocity {list(v)}")
         if comp is not None:
@@ -322,4 +465,5 @@ class PathFollower:
             lam=lam,
             cross_track_m=dist,
             saturation=Saturation(res.tangential, res.transversal, tilt, thrust_sat, res.approach_speed),
+            eta2_ref_m_s=eta2_ref,
         )

@@ -34,7 +34,7 @@ G = GRAVITY_M_S2
 # Share of the guaranteed acceleration used to plan the approach deceleration (the rest is
 # margin for the feedback and for the path's own curvature terms in alpha).
 APPROACH_DECEL_SHARE = 0.5
-_BISECTION_STEPS = 16
+BISECTION_STEPS = 16  # of the allocation's scalings (2^-16 of the correction)
 
 
 class LawOutput(NamedTuple):
@@ -138,8 +138,14 @@ class ControlLaw:
         return math.copysign(self.shape(self.kd_t, self.dv_lin_t, abs(dv)), dv)
 
     # ------------------------------------------------------------------ the two laws
-    def tube(self, terms: ExactTerms, eta2_ref: float) -> LawOutput | None:
-        """Exact TFL with limits inside the tube; None if beta is singular."""
+    def tube(
+        self, terms: ExactTerms, eta2_ref: float, feedforward_m_s2: float = 0.0, bisection_steps: int = BISECTION_STEPS
+    ) -> LawOutput | None:
+        """Exact TFL with limits inside the tube; None if beta is singular.
+
+        ``feedforward_m_s2``: added to the tangential law's u_eta (a speed profile's
+        d(eta2_ref)/dt); ``bisection_steps``: of the allocation's scalings (the any-state
+        feed-forward differentiates the law with more, so that it is smooth)."""
         cols = inverse_columns(terms.beta1, terms.beta2, terms.beta3)
         if cols is None:
             return None
@@ -148,6 +154,8 @@ class ControlLaw:
         al1, al2, al3 = terms.alpha
         u_xi, u_phi, reduced, limited = self.transversal(st.xi1, st.xi2, st.phi1, st.phi2)
         u_eta = self.tangential(eta2_ref, st.eta2)
+        if feedforward_m_s2:
+            u_eta += feedforward_m_s2
         # a_b: keeps (eta2, xi2, phi2) constant; a_t: transversal correction
         bx = -(m1[0] * al1 + m2[0] * al2 + m3[0] * al3)
         by = -(m1[1] * al1 + m2[1] * al2 + m3[1] * al3)
@@ -165,7 +173,7 @@ class ControlLaw:
             reduced = True
             if ts.line_interval((bx, by, bz + G), m1) is None:
                 lo, hi = 0.0, 1.0
-                for _ in range(_BISECTION_STEPS):
+                for _ in range(bisection_steps):
                     mid = 0.5 * (lo + hi)
                     if ts.line_interval((mid * bx, mid * by, mid * bz + G), m1) is None:
                         hi = mid
@@ -175,7 +183,7 @@ class ControlLaw:
                 mu = 0.0
             else:
                 lo, hi = 0.0, 1.0
-                for _ in range(_BISECTION_STEPS):
+                for _ in range(bisection_steps):
                     mid = 0.5 * (lo + hi)
                     if ts.line_interval((bx + mid * tx, by + mid * ty, bz + mid * tz + G), m1) is None:
                         hi = mid

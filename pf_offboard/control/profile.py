@@ -1,0 +1,439 @@
+"""Speed profile eta2_ref(eta1): the fastest reference speed along the path that the vehicle's
+limits allow, with bounded tangential acceleration and jerk. Time-invariant: a function of the
+arclength eta1 only, precomputed once on an arclength grid.
+
+On the path at speed ``V(s)`` (s: distance travelled, m) the reference motion's acceleration is
+``a = sigma_ss V^2 + t_dir A`` with the tangential acceleration ``A = dV/dt = V dV/ds`` and the
+thrust vector ``f = a + g e_z`` (world ENU, z up). The profile keeps
+
+- ``g e_z + a / accel_share`` in the thrust set F of :class:`~pf_offboard.control.types.Limits`
+  (tilt, min/max thrust): the reference uses at most ``accel_share`` of what the limits allow in
+  that direction, the rest is left to the feedback;
+- ``|A| <= max_tangential_accel_m_s2`` and ``|dA/dt| = |V dA/ds| <= max_tangential_jerk_m_s3``;
+- ``V <= max_speed_m_s`` and the optional table of speeds over eta1;
+- ``V = 0`` at the end of an open path (the end travelled towards).
+
+Computation (``b = V^2``, ``db/ds = 2 A``): the largest feasible ``b`` at every grid point
+(bisection on the line interval of F), a forward and a backward pass (the classic time-optimal
+profile of a point mass; on a closed path repeated around the loop until it is periodic), then jerk
+smoothing: a grey erosion followed by a triangular moving average whose half-width is
+``c V / J`` (metres), so the result stays below the passes' profile; ``c`` is the smallest that
+meets the jerk bound on the grid, and wherever the smoothing made the acceleration infeasible the
+pointwise bound is lowered and the smoothing repeated. The result is interpolated by a C2 cubic
+spline of ``b`` over eta1 (periodic on closed paths), giving ``V, dV/deta1, d2V/deta1^2``.
+
+:func:`point_mass_lap_time` is the lower bound the profile is compared with: the same passes
+without the jerk bound (a point mass under the same acceleration limits).
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pf_offboard.control.feasible import ThrustSet
+from pf_offboard.control.types import GRAVITY_M_S2, Limits
+from pf_offboard.errors import InputError
+
+if TYPE_CHECKING:
+    from pf_offboard.path import Path
+
+G = GRAVITY_M_S2
+MAX_PROFILE_SPEED_M_S = 20.0
+GRID_STEP_M = 0.02  # arclength grid of the precomputation (finer on short paths)
+MIN_GRID_POINTS = 200
+MAX_GRID_POINTS = 20000
+_FEASIBLE_TOL = 1e-9
+JERK_FLOOR_SPEED_M_S = 0.25  # speed used in the jerk bound below it (m/s): see _jerk_smooth
+
+
+@dataclass(frozen=True)
+class SpeedProfileSpec:
+    """What the user asks of the speed profile (config section ``speed_profile``).
+
+    ``max_speed_m_s``: the largest speed (m/s, > 0; the direction of travel is the sign of
+    ``speed_m_s``). ``table_eta1_m_speed_m_s``: optional ((eta1_m, speed_m_s), ...) caps,
+    interpolated linearly over eta1 (constant beyond an open path's table, periodic on a closed
+    one). ``max_tangential_accel_m_s2`` / ``max_tangential_jerk_m_s3``: bounds on dV/dt and
+    d2V/dt2 along the path. ``accel_share``: share (0, 1] of the limits the reference motion may
+    use; the rest is the feedback's margin.
+    """
+
+    max_speed_m_s: float
+    table_eta1_m_speed_m_s: tuple[tuple[float, float], ...] = field(default=())
+    max_tangential_accel_m_s2: float = 3.0
+    max_tangential_jerk_m_s3: float = 10.0
+    accel_share: float = 0.7
+
+    def __post_init__(self) -> None:
+        bounds = {
+            "max_speed_m_s": (0.05, MAX_PROFILE_SPEED_M_S),
+            "max_tangential_accel_m_s2": (0.05, 50.0),
+            "max_tangential_jerk_m_s3": (0.1, 1000.0),
+            "accel_share": (0.05, 1.0),
+        }
+        for name, (lo, hi) in bounds.items():
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
+                raise InputError(f"speed_profile.{name}", f"must be a number in [{lo:g}, {hi:g}], got {v!r}")
+            object.__setattr__(self, name, float(v))
+        table = tuple((float(a), float(b)) for a, b in self.table_eta1_m_speed_m_s)
+        object.__setattr__(self, "table_eta1_m_speed_m_s", table)
+        prev = -math.inf
+        for i, (s, v) in enumerate(table):
+            if not (math.isfinite(s) and math.isfinite(v)):
+                raise InputError(f"speed_profile.table[{i}]", "must be finite numbers")
+            if s < 0.0:
+                raise InputError(f"speed_profile.table[{i}]", f"eta1 must be >= 0 m, got {s:g}")
+            if s <= prev:
+                raise InputError(f"speed_profile.table[{i}]", "eta1 values must be strictly increasing")
+            if not 0.05 <= v <= MAX_PROFILE_SPEED_M_S:
+                raise InputError(f"speed_profile.table[{i}]", f"speed must be in [0.05, {MAX_PROFILE_SPEED_M_S:g}] m/s, got {v:g}")
+            prev = s
+
+
+class ProfileStats(NamedTuple):
+    """Figures of a computed profile (direction of travel, one lap / the whole open path)."""
+
+    travel_time_s: float  # lap time (closed) or time from start to end (open) at the profile
+    point_mass_time_s: float  # the same for the point-mass lower bound (no jerk bound)
+    max_speed_m_s: float
+    min_speed_m_s: float
+    max_tangential_accel_m_s2: float  # on the grid
+    max_tangential_jerk_m_s3: float  # on the grid, where V > 0.05 m/s
+    max_accel_use: float  # largest share of the limits the reference motion uses (<= accel_share)
+
+
+# ---------------------------------------------------------------------------------- geometry
+class _Geometry(NamedTuple):
+    u: NDArray[np.float64]  # distance travelled at the grid points, m (0 .. L or L - ds)
+    t_dir: NDArray[np.float64]  # (n, 3) unit tangent in the direction of travel
+    s_ss: NDArray[np.float64]  # (n, 3) d2 sigma / ds2 (the same in both directions)
+    cap_b: NDArray[np.float64]  # (n,) speed cap squared (max speed, table)
+    ds: float
+
+
+def _geometry(path: Path, spec: SpeedProfileSpec, direction: float) -> _Geometry:
+    L = float(path.length_m)
+    n = int(min(MAX_GRID_POINTS, max(MIN_GRID_POINTS, math.ceil(L / GRID_STEP_M))))
+    ds = L / n
+    closed = bool(path.closed)
+    u = np.arange(n if closed else n + 1) * ds
+    eta1 = (L - u) % L if (direction < 0.0 and closed) else (L - u if direction < 0.0 else u)
+    lam = np.array([path.lam_at_arclength(e) for e in eta1.tolist()])
+    sp = path._spline
+    d1 = sp.eval_vectorised(lam, 1)
+    d2 = sp.eval_vectorised(lam, 2)
+    s2 = np.einsum("ij,ij->i", d1, d1)
+    sn = np.sqrt(s2)
+    sprime = np.einsum("ij,ij->i", d1, d2) / sn
+    t = d1 / sn[:, None]
+    s_ss = d2 / s2[:, None] - d1 * (sprime / sn**3)[:, None]
+    t_dir = t if direction >= 0.0 else -t
+    cap = np.full(len(u), spec.max_speed_m_s)
+    if spec.table_eta1_m_speed_m_s:
+        cap = np.minimum(cap, _table_speed(spec.table_eta1_m_speed_m_s, eta1, L, closed))
+    return _Geometry(u, t_dir, s_ss, cap * cap, ds)
+
+
+def _table_speed(table: tuple[tuple[float, float], ...], eta1: NDArray[np.float64], L: float, closed: bool) -> NDArray[np.float64]:
+    xs = np.array([p[0] for p in table])
+    vs = np.array([p[1] for p in table])
+    if closed:
+        if xs[-1] >= xs[0] + L:
+            raise InputError("speed_profile.table", f"eta1 values must span less than one lap ({L:.3f} m) on a closed path")
+        x = xs[0] + (eta1 - xs[0]) % L
+        return np.interp(x, np.append(xs, xs[0] + L), np.append(vs, vs[0]))
+    return np.interp(eta1, xs, vs)
+
+
+# ---------------------------------------------------------------------------------- constraints
+class _Feasible:
+    """Tangential-acceleration interval at (grid point, b = V^2) under the scaled thrust set."""
+
+    def __init__(self, geo: _Geometry, limits: Limits, spec: SpeedProfileSpec) -> None:
+        self.set = ThrustSet(limits.min_thrust_m_s2, limits.max_thrust_m_s2, limits.tan_tilt)
+        self.inv_share = 1.0 / spec.accel_share
+        self.a_max = spec.max_tangential_accel_m_s2
+        self.t = [tuple(r) for r in geo.t_dir.tolist()]
+        self.k = [tuple(r) for r in geo.s_ss.tolist()]
+
+    def interval(self, i: int, b: float) -> tuple[float, float] | None:
+        """``{A : g e_z + (sigma_ss b + t A) / share in F, |A| <= a_max}`` or None."""
+        k, t, c = self.k[i], self.t[i], self.inv_share
+        iv = self.set.line_interval((k[0] * b * c, k[1] * b * c, G + k[2] * b * c), (t[0] * c, t[1] * c, t[2] * c))
+        if iv is None:
+            return None
+        lo, hi = max(iv[0], -self.a_max), min(iv[1], self.a_max)
+        return (lo, hi) if lo <= hi + _FEASIBLE_TOL else None
+
+    def max_b(self, i: int, cap: float) -> float:
+        """Largest b <= cap at which some tangential acceleration is feasible."""
+        if self.interval(i, cap) is not None:
+            return cap
+        lo, hi = 0.0, cap
+        for _ in range(32):
+            mid = 0.5 * (lo + hi)
+            if self.interval(i, mid) is None:
+                hi = mid
+            else:
+                lo = mid
+        return lo
+
+    def use(self, i: int, b: float, a: float) -> float:
+        """Share of the limits used by (b, A): the smallest r with g e_z + (...)/r in F (bisection)."""
+        k, t = self.k[i], self.t[i]
+        if b == 0.0 and a == 0.0:
+            return 0.0
+        ax, ay, az = k[0] * b + t[0] * a, k[1] * b + t[1] * a, k[2] * b + t[2] * a
+        lo, hi = 0.0, 1.0
+        while not self.set.contains((ax / hi, ay / hi, G + az / hi), 0.0) and hi < 64.0:
+            lo, hi = hi, 2.0 * hi
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if mid > 0.0 and self.set.contains((ax / mid, ay / mid, G + az / mid), 0.0):
+                hi = mid
+            else:
+                lo = mid
+        return hi
+
+
+def _passes(ub: NDArray[np.float64], feas: _Feasible, ds: float, closed: bool) -> NDArray[np.float64]:
+    """Forward and backward passes: the largest b <= ub with db/ds = 2A, A feasible (point mass)."""
+    b = ub.copy()
+    n = len(b)
+    for _ in range(4 if closed else 1):
+        changed = False
+        # forward: what the vehicle can reach accelerating
+        rng = range(n) if closed else range(n - 1)
+        for i in rng:
+            j = (i + 1) % n
+            iv = feas.interval(i, b[i])
+            hi = iv[1] if iv is not None else 0.0
+            lim = b[i] + 2.0 * max(hi, 0.0) * ds
+            if b[j] > lim:
+                b[j] = lim
+                changed = True
+        # backward: what it can still stop from
+        for i in (range(n - 1, -1, -1) if closed else range(n - 2, -1, -1)):
+            j = (i + 1) % n
+            iv = feas.interval(j, b[j])
+            lo = iv[0] if iv is not None else 0.0
+            lim = b[j] - 2.0 * min(lo, 0.0) * ds
+            if b[i] > lim:
+                b[i] = lim
+                changed = True
+        if not changed:
+            break
+    return np.maximum(b, 0.0)
+
+
+def _jerk_smooth(
+    ub: NDArray[np.float64], feas: _Feasible, ds: float, jerk: float, closed: bool
+) -> NDArray[np.float64] | None:
+    """The jerk-bounded profile below ``ub`` (the passes' result): a linear programme in b.
+
+    ``0 <= b <= ub``; the tangential acceleration of every grid interval ``(b_{i+1} - b_i)/(2 ds)``
+    within the interval that is feasible at ``ub`` (the passes' speed); the jerk
+    ``V (b_{i+1} - 2 b_i + b_{i-1}) / (2 ds^2)`` within +-J with V bounded by
+    ``max(sqrt(ub_i), JERK_FLOOR_SPEED_M_S)`` (so the bound is conservative, and an open path's
+    end is reached with V proportional to the distance left, like the stopping law). The objective
+    is the lap time linearised around the previous solution (two rounds). None if the solver fails.
+    """
+    from scipy.optimize import linprog
+    from scipy.sparse import coo_matrix
+
+    n = len(ub)
+    idx = np.arange(n)
+    m = n if closed else n - 1  # intervals
+    i0, i1 = idx[:m], (idx[:m] + 1) % n
+    lo = np.empty(m)
+    hi = np.empty(m)
+    for k in range(m):
+        a = feas.interval(int(i0[k]), float(ub[i0[k]]))
+        b = feas.interval(int(i1[k]), float(ub[i1[k]]))
+        lo[k] = max(a[0] if a else 0.0, b[0] if b else 0.0, -feas.a_max)
+        hi[k] = min(a[1] if a else 0.0, b[1] if b else 0.0, feas.a_max)
+    hi = np.maximum(hi, 0.0)
+    lo = np.minimum(lo, 0.0)
+    # rows: (b_{i+1} - b_i) <= 2 ds hi ; -(b_{i+1} - b_i) <= -2 ds lo
+    rows, cols, vals = [], [], []
+    r = np.arange(m)
+    rows += [r, r, m + r, m + r]
+    cols += [i1, i0, i1, i0]
+    vals += [np.ones(m), -np.ones(m), -np.ones(m), np.ones(m)]
+    rhs = [2.0 * ds * hi, -2.0 * ds * lo]
+    # jerk rows at interior points j (closed: all)
+    j = idx if closed else idx[1:-1]
+    nj = len(j)
+    jm, jp = (j - 1) % n, (j + 1) % n
+    v_bound = np.maximum(np.sqrt(np.maximum(ub[j], 0.0)), JERK_FLOOR_SPEED_M_S)
+    cap = 2.0 * ds * ds * jerk / v_bound
+    base = 2 * m
+    rj = np.arange(nj)
+    for sign, off in ((1.0, base), (-1.0, base + nj)):
+        rows += [off + rj, off + rj, off + rj]
+        cols += [jp, j, jm]
+        vals += [sign * np.ones(nj), -2.0 * sign * np.ones(nj), sign * np.ones(nj)]
+        rhs.append(cap)
+    a_ub = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * m + 2 * nj, n)).tocsr()
+    b_ub = np.concatenate(rhs)
+    bounds = np.column_stack([np.zeros(n), ub])
+    ref = np.maximum(ub, 1e-3)
+    b = None
+    for _ in range(2):
+        w = ref ** -1.5
+        res = linprog(-w, A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
+        if res.status != 0:
+            return b
+        b = np.clip(res.x, 0.0, ub)
+        ref = np.maximum(b, 1e-3)
+    return b
+
+
+def _derivatives(b: NDArray[np.float64], ds: float, closed: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(A, jerk) on the grid by central differences of b (A = b'/2, jerk = V A')."""
+    if closed:
+        a = (np.roll(b, -1) - np.roll(b, 1)) / (4.0 * ds)
+        da = (np.roll(a, -1) - np.roll(a, 1)) / (2.0 * ds)
+    else:
+        a = np.gradient(b, ds) / 2.0
+        da = np.gradient(a, ds)
+    return a, np.sqrt(np.maximum(b, 0.0)) * da
+
+
+def _travel_time(b: NDArray[np.float64], ds: float, closed: bool) -> float:
+    v = np.sqrt(np.maximum(b, 0.0))
+    v1 = np.roll(v, -1) if closed else v[1:]
+    v0 = v if closed else v[:-1]
+    s = v0 + v1
+    return float(np.sum(np.where(s > 0.0, 2.0 * ds / np.where(s > 0.0, s, 1.0), math.inf)))
+
+
+def _upper_bound(geo: _Geometry, feas: _Feasible, closed: bool) -> NDArray[np.float64]:
+    """Pointwise largest feasible b (speed caps, limits; 0 at an open path's end)."""
+    ub = np.array([feas.max_b(i, c) for i, c in enumerate(geo.cap_b.tolist())])
+    if not closed:
+        ub[-1] = 0.0
+    return ub
+
+
+# ---------------------------------------------------------------------------------- the profile
+class SpeedProfile:
+    """eta2_ref(eta1) and its eta1-derivatives for one path, direction and set of limits.
+
+    ``evaluate(eta1) -> (speed, d speed / d eta1, d2 speed / d eta1^2)``: signed (the sign of
+    ``direction``), m/s, 1/s, 1/(m s). On a closed path periodic in eta1; on an open path clamped
+    to [0, L] (0 at the end travelled towards).
+    """
+
+    def __init__(self, path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float) -> None:
+        self.spec = spec
+        self.direction = 1.0 if direction >= 0.0 else -1.0
+        self.closed = bool(path.closed)
+        self.length_m = float(path.length_m)
+        geo = _geometry(path, spec, self.direction)
+        feas = _Feasible(geo, limits, spec)
+        closed = self.closed
+        ub = _upper_bound(geo, feas, closed)
+        self._pm_b = _passes(ub, feas, geo.ds, closed)
+        b = self._smoothed(ub, geo, feas)
+        self._b_travel = b
+        self._geo = geo
+        self._feas = feas
+        # spline of b over eta1 (increasing)
+        L, ds = self.length_m, geo.ds
+        if closed:
+            bb = b if self.direction > 0 else np.roll(b[::-1], 1)
+            x = np.arange(len(bb) + 1) * ds
+            y = np.append(bb, bb[0])
+            bc = "periodic"
+        else:
+            bb = b if self.direction > 0 else b[::-1]
+            x = np.arange(len(bb)) * ds
+            x[-1] = L
+            y = bb
+            bc = "not-a-knot"
+        from scipy.interpolate import CubicSpline
+
+        spl = CubicSpline(x, y, bc_type=bc)
+        self._knots = spl.x.tolist()
+        self._coef = [tuple(spl.c[:, i].tolist()) for i in range(spl.c.shape[1])]
+        self._nseg = len(self._coef)
+        a, jerk = _derivatives(b, ds, closed)
+        moving = np.sqrt(np.maximum(b, 0.0)) > 0.05
+        self.stats = ProfileStats(
+            travel_time_s=_travel_time(b, ds, closed),
+            point_mass_time_s=_travel_time(self._pm_b, ds, closed),
+            max_speed_m_s=float(np.sqrt(b.max())),
+            min_speed_m_s=float(np.sqrt(max(b.min(), 0.0))),
+            max_tangential_accel_m_s2=float(np.abs(a).max()),
+            max_tangential_jerk_m_s3=float(np.abs(jerk[moving]).max()) if moving.any() else 0.0,
+            max_accel_use=float(max(feas.use(i, float(bi), float(ai)) for i, (bi, ai) in enumerate(zip(b, a)))),
+        )
+
+    def _smoothed(self, ub: NDArray[np.float64], geo: _Geometry, feas: _Feasible) -> NDArray[np.float64]:
+        """Passes + jerk smoothing; lowers ub where the smoothing left an infeasible acceleration."""
+        ds, closed = geo.ds, self.closed
+        ub = ub.copy()
+        b = ub
+        for _ in range(20):
+            b_pass = _passes(ub, feas, ds, closed)
+            smooth = _jerk_smooth(b_pass, feas, ds, self.spec.max_tangential_jerk_m_s3, closed)
+            if smooth is None:
+                raise InputError("speed_profile", "no jerk-bounded speed profile found (solver failed)")
+            b = smooth
+            a = (np.roll(b, -1) - b) / (2.0 * ds)
+            bad = []
+            for i in range(len(b) if closed else len(b) - 1):
+                k = (i + 1) % len(b)
+                if not (_within(feas.interval(i, float(b[i])), float(a[i])) and _within(feas.interval(k, float(b[k])), float(a[i]))):
+                    bad.append(i)
+            if not bad:
+                return b
+            for i in bad:
+                ub[i] = 0.97 * min(ub[i], b[i])
+        return b
+
+    # ------------------------------------------------------------------ runtime
+    def evaluate(self, eta1: float) -> tuple[float, float, float]:
+        """(eta2_ref m/s, d eta2_ref / d eta1 1/s, d2 eta2_ref / d eta1^2 1/(m s)) at arclength eta1 (m)."""
+        L = self.length_m
+        x = eta1 % L if self.closed else (0.0 if eta1 < 0.0 else (L if eta1 > L else eta1))
+        i = bisect_right(self._knots, x) - 1
+        i = 0 if i < 0 else (self._nseg - 1 if i >= self._nseg else i)
+        c3, c2, c1, c0 = self._coef[i]
+        h = x - self._knots[i]
+        b = c0 + h * (c1 + h * (c2 + h * c3))
+        if b <= 1e-12:
+            return 0.0, 0.0, 0.0
+        db = c1 + h * (2.0 * c2 + 3.0 * h * c3)
+        ddb = 2.0 * c2 + 6.0 * h * c3
+        v = math.sqrt(b)
+        dv = 0.5 * db / v
+        ddv = (0.5 * ddb - dv * dv) / v
+        s = self.direction
+        return s * v, s * dv, s * ddv
+
+    def speed_m_s(self, eta1: float) -> float:
+        """|eta2_ref| at eta1 (m/s)."""
+        return abs(self.evaluate(eta1)[0])
+
+
+def _within(iv: tuple[float, float] | None, a: float, tol: float = 1e-6) -> bool:
+    return iv is not None and iv[0] - tol <= a <= iv[1] + tol
+
+
+def point_mass_lap_time(path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float = 1.0) -> float:
+    """Travel time (s) of a point mass along the path under the profile's acceleration limits
+    (thrust set scaled by ``accel_share``, ``max_tangential_accel``, speed caps) and no jerk bound:
+    the lower bound for any profile with those limits (one lap on a closed path)."""
+    geo = _geometry(path, spec, direction)
+    feas = _Feasible(geo, limits, spec)
+    closed = bool(path.closed)
+    return _travel_time(_passes(_upper_bound(geo, feas, closed), feas, geo.ds, closed), geo.ds, closed)
