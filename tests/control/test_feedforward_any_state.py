@@ -108,7 +108,7 @@ def test_any_state_rates_are_the_rate_of_the_commanded_attitude(yaw: YawSpec | N
     onpath.profile = ff.profile
     rng = np.random.default_rng(20)
     errors, onpath_errors, kinks = [], [], 0
-    while len(errors) < 40:
+    while len(errors) < 25:
         y0, v0 = _random_tube_state(ff, rng)
         ff.reset()
         cmd = ff.update(y0, v0)
@@ -116,11 +116,12 @@ def test_any_state_rates_are_the_rate_of_the_commanded_attitude(yaw: YawSpec | N
         ref, kink = _rates(_flow_attitudes(flow, y0, v0))
         if kink > 1e-2:  # a kink of the law (min of approach-speed bounds, a limit) inside the stencil
             kinks += 1
-            assert kinks <= 10
+            assert kinks <= 8
             continue
         errors.append(float(np.max(np.abs(cmd.body_rates - ref))))
         onpath.reset()
         onpath_errors.append(float(np.max(np.abs(onpath.update(y0, v0).body_rates - ref))))
+    print(f"any-state: worst |omega_ff - omega| {max(errors):.1e} rad/s over {len(errors)} states ({kinks} at a kink); on-path median {np.median(onpath_errors):.2f}")
     assert max(errors) <= 1e-4, max(errors)
     # the on-path feed-forward is not the rate of the commanded attitude off the path
     assert np.median(onpath_errors) > 0.05

@@ -1,0 +1,184 @@
+"""Speed profile eta2_ref(eta1) (config section speed_profile): its bounds, the end stop, time
+invariance, and exact speed tracking on the path in closed loop (ideal inner loop)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from conftest import PAPER_YAML, ROOT
+
+from pf_offboard import PathFollower
+from pf_offboard.config import load_config, parse_config
+from pf_offboard.control.feasible import ThrustSet
+from pf_offboard.control.feedforward import onpath_derivatives
+from pf_offboard.control.profile import SpeedProfileSpec, point_mass_lap_time
+from pf_offboard.errors import ConfigError
+
+SPEC = SpeedProfileSpec(5.0, max_tangential_accel_m_s2=3.0, max_tangential_jerk_m_s3=10.0, accel_share=0.7)
+
+
+def _follower(yaml_path, spec: SpeedProfileSpec = SPEC, speed: float | None = None) -> PathFollower:
+    cfg = load_config(yaml_path)
+    cfg = dataclasses.replace(cfg, speed_profile=spec, speed_m_s=cfg.speed_m_s if speed is None else speed)
+    return PathFollower.from_config(cfg)
+
+
+@pytest.fixture(scope="module")
+def paper() -> PathFollower:
+    return _follower(PAPER_YAML)
+
+
+def _share_used(ts: ThrustSet, acc: np.ndarray) -> float:
+    """Smallest r with g e_z + acc / r in the thrust set (bisection)."""
+    lo, hi = 0.0, 4.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if ts.contains((acc[0] / mid, acc[1] / mid, 9.81 + acc[2] / mid), 0.0):
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+def _check_bounds(f: PathFollower, spec: SpeedProfileSpec, n: int = 3001) -> np.ndarray:
+    """The reference motion on the path, from the profile's own derivatives: returns E(eta1)."""
+    path, lim = f.path, f.limits
+    ts = ThrustSet(lim.min_thrust_m_s2, lim.max_thrust_m_s2, lim.tan_tilt)
+    xs = np.linspace(0.0, path.length_m, n)
+    e = np.empty(n)
+    for k, x in enumerate(xs):
+        v, dv, ddv = f.profile.evaluate(float(x))
+        e[k] = v
+        a_t = v * dv  # d eta2 / dt on the path (along increasing eta1)
+        jerk_t = v * (dv * dv + v * ddv)
+        assert abs(v) <= spec.max_speed_m_s + 1e-9
+        assert abs(a_t) <= spec.max_tangential_accel_m_s2 * 1.001
+        if abs(v) > 0.05:
+            assert abs(jerk_t) <= spec.max_tangential_jerk_m_s3 * 1.01, (x, jerk_t)
+        q = path.eval_floats(path.lam_at_arclength(float(x)))
+        t, s_ss, _ = onpath_derivatives(q[3:6], q[6:9], q[9:12])
+        acc = np.array(s_ss) * v * v + np.array(t) * a_t  # lateral kappa v^2 + tangential
+        assert _share_used(ts, acc) <= spec.accel_share * 1.002, (x, acc)
+    return e
+
+
+def test_closed_profile_bounds_and_lap_time(paper: PathFollower) -> None:
+    e = _check_bounds(paper, SPEC)
+    assert np.all(e < 0.0)  # the config's direction (speed_m_s < 0)
+    st = paper.profile.stats
+    bound = point_mass_lap_time(paper.path, SPEC, paper.limits, -1.0)
+    assert bound == pytest.approx(st.point_mass_time_s)
+    assert bound <= st.travel_time_s <= 1.15 * bound
+    # it is a profile, not a constant: slower in the tight turns than elsewhere
+    assert abs(e).max() - abs(e).min() > 0.5
+    # periodic, a function of eta1 only
+    L = paper.path.length_m
+    for x in (0.0, 1.3, 7.7):
+        assert paper.reference(x) == pytest.approx(paper.reference(x + L), abs=1e-12)
+
+
+def test_table_caps_the_speed() -> None:
+    spec = dataclasses.replace(SPEC, table_eta1_m_speed_m_s=((0.0, 1.0), (6.0, 1.0), (9.0, 5.0)))
+    f = _follower(PAPER_YAML, spec)
+    assert abs(f.reference(3.0)[0]) <= 1.0 + 1e-9
+    assert abs(f.reference(4.0)[0]) == pytest.approx(1.0, abs=0.02)
+    _check_bounds(f, spec, n=601)
+
+
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_open_path_stops_at_its_end(direction: float) -> None:
+    f = _follower(ROOT / "configs" / "helix.yaml", speed=direction)
+    e = _check_bounds(f, SPEC, n=1201)
+    L = f.path.length_m
+    end, start = (L, 0.0) if direction > 0 else (0.0, L)
+    assert f.reference(end)[0] == 0.0
+    assert abs(f.reference(start)[0]) > 1.0  # no stop at the start
+    # decelerates monotonically over the last metre, to below 1 cm/s within 1 mm of the end
+    last = np.array([abs(f.reference(end - direction * d)[0]) for d in np.linspace(1.0, 0.0, 201)])
+    assert np.all(np.diff(last) <= 1e-12)
+    assert abs(f.reference(end - direction * 1e-3)[0]) < 0.02
+    assert np.sign(e[np.abs(e) > 0]).tolist() == [direction] * int(np.count_nonzero(e))
+
+
+def test_command_is_time_invariant(paper: PathFollower) -> None:
+    """The command depends on the state only: the same state after different histories."""
+    y, v = np.array([0.2, -1.4, 2.1]), np.array([-1.0, 2.0, 0.3])
+    other = PathFollower(paper.path, paper.speed, gains=paper.gains, yaw=paper.yaw, limits=paper.limits)
+    other.profile = paper.profile
+    paper.reset()
+    a = paper.update(y, v)
+    for k in range(50):  # a different history (nearby states) first
+        other.update(y + 0.01 * k * np.array([0.1, 0.1, -0.1]), v)
+    b = other.update(y, v)
+    np.testing.assert_array_equal(a.acceleration, b.acceleration)
+    np.testing.assert_array_equal(a.body_rates, b.body_rates)
+    assert a.eta2_ref_m_s == b.eta2_ref_m_s == paper.reference(a.state.eta1)[0]
+
+
+def test_closed_loop_tracks_the_profile_exactly(paper: PathFollower) -> None:
+    """Ideal inner loop (RK4, 4 ms), started on the path at eta2_ref: one lap stays on the path and
+    eta2 = eta2_ref(eta1) to a fraction of a mm/s (the tangential feed-forward d eta2_ref/dt);
+    without it the velocity loop would lag by A / kd_t (up to 7 cm/s here)."""
+    f = paper
+    f.reset()
+    lam0 = 0.0
+    p = f.path.eval(lam0)
+    t = p.d1 / np.linalg.norm(p.d1)
+    y, v = p.sigma.copy(), f.reference(0.0)[0] * t
+    dt = 0.004
+
+    def acc(yy: np.ndarray, vv: np.ndarray) -> np.ndarray:
+        return f.update(yy, vv).acceleration
+
+    steps = int(math.ceil(f.profile.stats.travel_time_s / dt))
+    worst_ct, worst_speed, sat = 0.0, 0.0, 0
+    for _ in range(steps):
+        k1 = acc(y, v)
+        k2 = acc(y + 0.5 * dt * v, v + 0.5 * dt * k1)
+        k3 = acc(y + 0.5 * dt * (v + 0.5 * dt * k1), v + 0.5 * dt * k2)
+        k4 = acc(y + dt * (v + 0.5 * dt * k2), v + dt * k3)
+        y = y + dt * (v + dt / 6.0 * (k1 + k2 + k3))
+        v = v + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        cmd = f.update(y, v)
+        worst_ct = max(worst_ct, cmd.cross_track_m)
+        worst_speed = max(worst_speed, abs(cmd.state.eta2 - cmd.eta2_ref_m_s))
+        sat += any(cmd.saturation)
+    print(f"one lap: max cross-track {worst_ct:.2e} m, max |eta2 - eta2_ref| {worst_speed:.2e} m/s")
+    assert worst_ct < 1e-5 and worst_speed < 5e-4 and sat == 0, (worst_ct, worst_speed, sat)
+
+
+@pytest.mark.parametrize(
+    ("section", "field", "reason"),
+    [
+        ({"max_tangential_accel_m_s2": 2.0}, "speed_profile.max_speed_m_s", "missing"),
+        ({"max_speed_m_s": 0.0}, "speed_profile.max_speed_m_s", ">= 0.05"),
+        ({"max_speed_m_s": 3.0, "accel_share": 1.5}, "speed_profile.accel_share", "<= 1"),
+        ({"max_speed_m_s": 3.0, "max_tangential_jerk_m_s3": "x"}, "speed_profile.max_tangential_jerk_m_s3", "number"),
+        ({"max_speed_m_s": 3.0, "table": [[0, 1], [0, 2]]}, "speed_profile.table[1]", "strictly increasing"),
+        ({"max_speed_m_s": 3.0, "table": [[0, 1], [20, 2]]}, "speed_profile.table", "one lap"),
+        ({"max_speed_m_s": 3.0, "table": [[0, 1, 2]]}, "speed_profile.table[0]", "2 numbers"),
+        ({"max_speed_m_s": 3.0, "max_jerk": 2}, "speed_profile.max_jerk", "unknown key"),
+    ],
+)
+def test_bad_speed_profile_names_the_field(section: dict, field: str, reason: str) -> None:
+    import yaml
+
+    data = yaml.safe_load(PAPER_YAML.read_text())
+    data["speed_profile"] = section
+    with pytest.raises(ConfigError) as err:
+        parse_config(data)
+    assert err.value.field == field and reason in err.value.reason, (err.value.field, err.value.reason)
+
+
+def test_feedforward_key() -> None:
+    import yaml
+
+    data = yaml.safe_load(PAPER_YAML.read_text())
+    assert parse_config(data).feedforward == "on_path" and parse_config(data).speed_profile is None
+    data["feedforward"] = "everywhere"
+    with pytest.raises(ConfigError) as err:
+        parse_config(data)
+    assert err.value.field == "feedforward" and "on_path, any_state" in err.value.reason
