@@ -533,7 +533,7 @@ def _speed_profile(data: Any) -> SpeedProfileSpec | None:
     """``speed_profile:`` section (absent or null: the constant ``speed_m_s``)."""
     if data is None:
         return None
-    keys = ("max_speed_m_s", "table", "max_tangential_accel_m_s2", "max_tangential_jerk_m_s3", "accel_share")
+    keys = ("max_speed_m_s", "table", "max_tangential_accel_m_s2", "max_tangential_jerk_m_s3", "accel_share", "max_body_rate_rad_s")
     d = _section(data, "speed_profile", keys)
     if "max_speed_m_s" not in d:
         raise ConfigError("speed_profile.max_speed_m_s", "missing (required in a speed_profile section)")
@@ -545,6 +545,8 @@ def _speed_profile(data: Any) -> SpeedProfileSpec | None:
         "max_tangential_jerk_m_s3": _number(d, "max_tangential_jerk_m_s3", "speed_profile.max_tangential_jerk_m_s3",
                                             default.max_tangential_jerk_m_s3, 0.1, 1000.0),
         "accel_share": _number(d, "accel_share", "speed_profile.accel_share", default.accel_share, 0.05, 1.0),
+        "max_body_rate_rad_s": _number(d, "max_body_rate_rad_s", "speed_profile.max_body_rate_rad_s",
+                                       default.max_body_rate_rad_s, 0.1, 20.0),
     }  # fmt: skip
     table = _pairs(d["table"], "speed_profile.table", 2) if d.get("table") is not None else []
     try:

@@ -11,6 +11,8 @@ thrust vector ``f = a + g e_z`` (world ENU, z up). The profile keeps
   that direction, the rest is left to the feedback;
 - ``|A| <= max_tangential_accel_m_s2`` and ``|dA/dt| = |V dA/ds| <= max_tangential_jerk_m_s3``;
 - ``V <= max_speed_m_s`` and the optional table of speeds over eta1;
+- the roll/pitch rate of the reference thrust vector (eq. 25 with the on-path jerk) within
+  ``max_body_rate_rad_s``;
 - ``V = 0`` at the end of an open path (the end travelled towards).
 
 Computation (``b = V^2``, ``db/ds = 2 A``, grid step ~2 cm): the largest feasible ``b`` at every
@@ -63,7 +65,9 @@ class SpeedProfileSpec:
     interpolated linearly over eta1 (constant beyond an open path's table, periodic on a closed
     one). ``max_tangential_accel_m_s2`` / ``max_tangential_jerk_m_s3``: bounds on dV/dt and
     d2V/dt2 along the path. ``accel_share``: share (0, 1] of the limits the reference motion may
-    use; the rest is the feedback's margin.
+    use; the rest is the feedback's margin. ``max_body_rate_rad_s``: the speed is capped where the
+    path's own jerk ``|sigma_sss| V^3`` would turn the thrust vector (|f| ~ g) faster than this
+    (rates mode bounds the commanded rates: 3.5 rad/s by default).
     """
 
     max_speed_m_s: float
@@ -71,6 +75,7 @@ class SpeedProfileSpec:
     max_tangential_accel_m_s2: float = 3.0
     max_tangential_jerk_m_s3: float = 10.0
     accel_share: float = 0.7
+    max_body_rate_rad_s: float = 3.0
 
     def __post_init__(self) -> None:
         bounds = {
@@ -78,6 +83,7 @@ class SpeedProfileSpec:
             "max_tangential_accel_m_s2": (0.05, 50.0),
             "max_tangential_jerk_m_s3": (0.1, 1000.0),
             "accel_share": (0.05, 1.0),
+            "max_body_rate_rad_s": (0.1, 20.0),
         }
         for name, (lo, hi) in bounds.items():
             v = getattr(self, name)
@@ -109,6 +115,7 @@ class ProfileStats(NamedTuple):
     max_tangential_accel_m_s2: float  # on the grid
     max_tangential_jerk_m_s3: float  # on the grid, where V > 0.05 m/s
     max_accel_use: float  # largest share of the limits the reference motion uses (<= accel_share)
+    max_tilt_rate_rad_s: float  # largest roll/pitch rate of the reference thrust vector (grid)
 
 
 # ---------------------------------------------------------------------------------- geometry
@@ -117,7 +124,9 @@ class _Geometry(NamedTuple):
     t_dir: NDArray[np.float64]  # (n, 3) unit tangent in the direction of travel
     s_ss: NDArray[np.float64]  # (n, 3) d2 sigma / ds2 (the same in both directions)
     cap_b: NDArray[np.float64]  # (n,) speed cap squared (max speed, table)
+    rate_cap_b: NDArray[np.float64]  # (n,) first guess of the body-rate cap squared
     ds: float
+    s_sss: NDArray[np.float64]  # (n, 3) d3 sigma / ds3 in the direction of travel
 
 
 def _geometry(path: Path, spec: SpeedProfileSpec, direction: float) -> _Geometry:
@@ -131,16 +140,24 @@ def _geometry(path: Path, spec: SpeedProfileSpec, direction: float) -> _Geometry
     sp = path._spline
     d1 = sp.eval_vectorised(lam, 1)
     d2 = sp.eval_vectorised(lam, 2)
+    d3 = sp.eval_vectorised(lam, 3)
     s2 = np.einsum("ij,ij->i", d1, d1)
     sn = np.sqrt(s2)
     sprime = np.einsum("ij,ij->i", d1, d2) / sn
+    spp = (np.einsum("ij,ij->i", d2, d2) + np.einsum("ij,ij->i", d1, d3)) / sn - sprime**2 / sn
     t = d1 / sn[:, None]
     s_ss = d2 / s2[:, None] - d1 * (sprime / sn**3)[:, None]
+    # sigma_sss (chain rule, as feedforward.onpath_derivatives)
+    s_sss = (d3 / sn[:, None] ** 3 - 3.0 * d2 * (sprime / sn**4)[:, None]
+             + d1 * ((-spp + 3.0 * sprime**2 / sn) / sn**4)[:, None])  # fmt: skip
     t_dir = t if direction >= 0.0 else -t
     cap = np.full(len(u), spec.max_speed_m_s)
+    # first guess of the body-rate bound: the path's jerk |sigma_sss| V^3 turning f ~ g
+    jn = np.maximum(np.linalg.norm(s_sss, axis=1), 1e-9)
+    rate_cap = np.cbrt(spec.max_body_rate_rad_s * G / jn) ** 2
     if spec.table_eta1_m_speed_m_s:
         cap = np.minimum(cap, _table_speed(spec.table_eta1_m_speed_m_s, eta1, L, closed))
-    return _Geometry(u, t_dir, s_ss, cap * cap, ds)
+    return _Geometry(u, t_dir, s_ss, cap * cap, rate_cap, ds, s_sss if direction >= 0.0 else -s_sss)
 
 
 def _table_speed(table: tuple[tuple[float, float], ...], eta1: NDArray[np.float64], L: float, closed: bool) -> NDArray[np.float64]:
@@ -309,6 +326,20 @@ def _derivatives(b: NDArray[np.float64], ds: float, closed: bool) -> tuple[NDArr
     return a, np.sqrt(np.maximum(b, 0.0)) * da
 
 
+def _tilt_rate(b: NDArray[np.float64], geo: _Geometry, closed: bool) -> NDArray[np.float64]:
+    """Roll/pitch rate (rad/s) of the reference thrust vector on the grid: |h| of eq. (25) with the
+    on-path jerk ``sigma_sss V^3 + 3 sigma_ss V A + t V dA/ds`` (travel direction)."""
+    a, jt = _derivatives(b, geo.ds, closed)
+    v = np.sqrt(np.maximum(b, 0.0))
+    j = geo.s_sss * (v**3)[:, None] + 3.0 * geo.s_ss * (v * a)[:, None] + geo.t_dir * jt[:, None]
+    f = geo.s_ss * b[:, None] + geo.t_dir * a[:, None]
+    f[:, 2] += G
+    fn = np.linalg.norm(f, axis=1)
+    z = f / fn[:, None]
+    h = j - np.einsum("ij,ij->i", j, z)[:, None] * z
+    return np.linalg.norm(h, axis=1) / fn
+
+
 def _travel_time(b: NDArray[np.float64], ds: float, closed: bool) -> float:
     v = np.sqrt(np.maximum(b, 0.0))
     v1 = np.roll(v, -1) if closed else v[1:]
@@ -343,8 +374,8 @@ class SpeedProfile:
         feas = _Feasible(geo, limits, spec)
         closed = self.closed
         ub = _upper_bound(geo, feas, closed)
-        self._pm_b = _passes(ub, feas, geo.ds, closed)
-        b = self._smoothed(ub, geo, feas)
+        self._pm_b = _passes(ub, feas, geo.ds, closed)  # the lower bound: acceleration limits only
+        b = self._smoothed(np.minimum(ub, geo.rate_cap_b), geo, feas)
         self._b_travel = b
         self._geo = geo
         self._feas = feas
@@ -367,6 +398,7 @@ class SpeedProfile:
             max_tangential_accel_m_s2=float(np.abs(a).max()),
             max_tangential_jerk_m_s3=float(np.abs(jerk[moving]).max()) if moving.any() else 0.0,
             max_accel_use=float(max(feas.use(i, float(bi), float(ai)) for i, (bi, ai) in enumerate(zip(b, a)))),
+            max_tilt_rate_rad_s=float(_tilt_rate(b, geo, closed).max()),
         )
 
     def _smoothed(self, ub: NDArray[np.float64], geo: _Geometry, feas: _Feasible) -> NDArray[np.float64]:
@@ -386,10 +418,17 @@ class SpeedProfile:
                 k = (i + 1) % len(b)
                 if not (_within(feas.interval(i, float(b[i])), float(a[i])) and _within(feas.interval(k, float(b[k])), float(a[i]))):
                     bad.append(i)
-            if not bad:
+            ratio = _tilt_rate(b, geo, closed) / self.spec.max_body_rate_rad_s
+            fast = np.flatnonzero(ratio > 1.0)
+            if not bad and len(fast) == 0:
                 return b
             for i in bad:
                 ub[i] = 0.97 * min(ub[i], b[i])
+            # the rate grows like V^3: lower b by the ratio^(2/3), a little more, over +-10 cm
+            w = max(1, int(round(0.1 / ds)))
+            for i in fast.tolist():
+                k = np.arange(i - w, i + w + 1) % len(b) if closed else np.arange(max(i - w, 0), min(i + w + 1, len(b)))
+                ub[k] = np.minimum(ub[k], 0.98 * b[i] * float(ratio[i]) ** (-2.0 / 3.0))
         return b
 
     # ------------------------------------------------------------------ runtime

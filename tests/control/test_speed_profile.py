@@ -62,6 +62,7 @@ def _check_bounds(f: PathFollower, spec: SpeedProfileSpec, n: int = 3001) -> np.
         t, s_ss, _ = onpath_derivatives(q[3:6], q[6:9], q[9:12])
         acc = np.array(s_ss) * v * v + np.array(t) * a_t  # lateral kappa v^2 + tangential
         assert _share_used(ts, acc) <= spec.accel_share * 1.002, (x, acc)
+    assert f.profile.stats.max_tilt_rate_rad_s <= spec.max_body_rate_rad_s * 1.01
     return e
 
 
