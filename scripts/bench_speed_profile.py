@@ -73,11 +73,13 @@ def flight(config: Path, vehicle: str, output: str, laps: float, out: Path) -> N
 
 
 def write_px4_profile(dst: Path) -> None:
-    """configs/px4-sih.yaml with the speed_profile section of configs/paper-profile.yaml."""
+    """configs/px4-sih.yaml with a speed profile as flown on the real PX4 SIH (the compensated
+    ~0.5 Hz loops of that config do not hold the path at the paper config's 3.4 m/s)."""
     import yaml
 
     raw = yaml.safe_load((ROOT / "configs" / "px4-sih.yaml").read_text())
-    raw["speed_profile"] = yaml.safe_load(CONFIG.read_text())["speed_profile"]
+    raw["speed_profile"] = {"max_speed_m_s": 2.0, "max_tangential_accel_m_s2": 2.0, "max_tangential_jerk_m_s3": 5.0,
+                            "accel_share": 0.5, "max_body_rate_rad_s": 2.0}  # fmt: skip
     dst.write_text(yaml.safe_dump(raw, sort_keys=False))
 
 
@@ -101,7 +103,7 @@ def main() -> None:
         write_px4_profile(px4)
         runs = [(CONFIG, "fast", "acceleration"), (CONFIG, "fast", "attitude"), (CONFIG, "fast", "rates")]
         if not args.quick:
-            runs += [(px4, "px4-sih", "acceleration"), (px4, "px4-sih", "attitude")]
+            runs += [(px4, "px4-sih", "acceleration")]
         for cfg, vehicle, output in runs:
             flight(cfg, vehicle, output, 4.0, out)
 

@@ -37,7 +37,8 @@ def _close_pairs(path, radius: float, min_gap: float) -> tuple[np.ndarray, np.nd
 def test_schema_keys(name):
     raw = yaml.safe_load((CONFIGS / name).read_text())
     # vehicle / compensation: the identified inner loop and its compensation (issue 8), optional
-    assert TOP_KEYS <= set(raw) <= TOP_KEYS | {"vehicle", "compensation"}
+    # speed_profile / feedforward (issue 10), optional
+    assert TOP_KEYS <= set(raw) <= TOP_KEYS | {"vehicle", "compensation", "speed_profile", "feedforward"}
     if raw["gains"] == "auto":  # derived from the vehicle section (configs/px4-sih.yaml)
         raw["gains"] = {"transversal": {"bandwidth_hz": 0, "damping": 0}, "tangential": {"bandwidth_hz": 0, "damping": 0}}
     assert set(raw["path"]) == {"frame", "closed", "moving_frame", "waypoints"}
