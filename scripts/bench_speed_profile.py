@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Speed-profile figures for docs/controller.md and the README (a benchmark, not a test).
 
-1. The profile of configs/paper-profile.yaml (the paper path, the paper's limits): lap time against
+1. The profile of configs/speed-profile.yaml (the paper path, the paper's limits): lap time against
    the point-mass lower bound under the same acceleration limits (and under the full limits),
    the largest share of the limits, tangential acceleration and jerk the reference uses.
 2. ``sim`` flights (in process, the mock autopilot) of that config: laps 2.. of 4 — measured lap
@@ -29,7 +29,7 @@ from pf_offboard.config import load_config  # noqa: E402
 from pf_offboard.control.profile import point_mass_lap_time  # noqa: E402
 from pf_offboard.sim.flight import SimSpec, simulate  # noqa: E402
 
-CONFIG = ROOT / "configs" / "paper-profile.yaml"
+CONFIG = ROOT / "configs" / "speed-profile.yaml"
 
 
 def profile_figures() -> None:
