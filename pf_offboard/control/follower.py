@@ -450,7 +450,17 @@ class PathFollower:
             lam = float(self._measured_projector.update(y_meas))
             sm = self._eval(lam)
             dist = math.sqrt((y_meas[0] - sm[0]) ** 2 + (y_meas[1] - sm[1]) ** 2 + (y_meas[2] - sm[2]) ** 2)
-            st = evaluate_terms(self.path, lam, y_meas, v_meas).state
+            mt = evaluate_terms(self.path, lam, y_meas, v_meas)
+            st = mt.state
+            # Far from the path (outside the tube) the exact eta2 is singular (1 - kappa xi1 -> 0):
+            # report the speed along the tangent there, blended as the law blends its inputs.
+            w_m = max((mt.tube - TUBE_INNER) / (TUBE_OUTER - TUBE_INNER), (dist - FAR_INNER_M) / (FAR_OUTER_M - FAR_INNER_M))
+            if w_m > 0.0:
+                w_m = min(w_m, 1.0)
+                t_m = sm[3:6]
+                n_t = math.sqrt(t_m[0] * t_m[0] + t_m[1] * t_m[1] + t_m[2] * t_m[2])
+                v_t = (t_m[0] * v_meas[0] + t_m[1] * v_meas[1] + t_m[2] * v_meas[2]) / n_t
+                st = st._replace(eta2=v_t if w_m >= 1.0 else (1.0 - w_m) * st.eta2 + w_m * v_t)
             # integrate the measured errors only in the exact tube and while nothing saturates
             free = w == 0.0 and not (res.tangential or res.transversal or tilt or thrust_sat)
             comp.integrate(t_s, eta2_ref - st.eta2, st.xi1, st.phi1, free)
