@@ -27,7 +27,7 @@ def test_resolve_by_name_or_file(tmp_path, monkeypatch) -> None:
     assert resolve_config("paper.yaml") == resolve_config("paper")
     (tmp_path / "paper").write_text("path: {waypoints: [[0, 0, 1], [1, 0, 1]]}\n")
     assert resolve_config("paper") == Path("paper")  # an existing file wins over a shipped name
-    with pytest.raises(InputError, match=r"--config: no such file: nosuch, and not a shipped config \(shipped: figure8, helix, paper"):
+    with pytest.raises(InputError, match=r"--config: no such file: nosuch, and not a shipped config \(shipped: arducopter, figure8, helix, paper"):
         resolve_config("nosuch")
     with pytest.raises(InputError, match="no such file"):
         resolve_config("dir/paper.yaml")  # a path is never looked up by name
@@ -37,7 +37,8 @@ def test_configs_command_lists_names_and_descriptions(capsys) -> None:
     assert main(["configs"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert [line.split()[0] for line in lines[:-1]] == sorted(c.name for c in shipped_configs())
-    assert "closed, planar figure-eight" in lines[0]
+    assert lines[0].startswith("arducopter") and "ArduCopter" in lines[0]
+    assert "closed, planar figure-eight" in lines[1]
 
 
 def test_init_writes_a_commented_copy_and_never_overwrites(tmp_path, monkeypatch, capsys) -> None:
