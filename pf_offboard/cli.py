@@ -20,6 +20,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("demo", "pf_offboard.app.demo", "fly the paper path against an embedded sitl-mock over real MAVLink"),
     ("fly", "pf_offboard.app.fly", "follow a path on a PX4 / ArduPilot vehicle over MAVLink"),
     ("sim", "pf_offboard.sim.cli", "in-process flight of the controller against the sitl_mock dynamics"),
+    ("sweep", "pf_offboard.sweep.cli", "many in-process sim flights from seeded random thrown starts, in parallel"),
     ("replay", "pf_offboard.logs.replay", "re-run the controller on a recorded flight and compare setpoints"),
     ("identify", "pf_offboard.identify.cli", "fit the vehicle's inner-loop response (vehicle: section) from logs or a short excitation"),
     ("plot", "pf_offboard.logs.plot", "paper-style figures (Figs. 4-9) from flight logs"),

@@ -107,7 +107,7 @@ class Autopilot:
         if spawn.kind == "hover":
             dyn_spawn = Spawn.hover(spawn.position_ned_m)
         elif spawn.kind == "throw":
-            dyn_spawn = Spawn.thrown(spawn.position_ned_m, spawn.velocity_ned_m_s)
+            dyn_spawn = Spawn.thrown(spawn.position_ned_m, spawn.velocity_ned_m_s, spawn.rates_frd_rad_s, spawn.q_ned_frd)
         else:
             dyn_spawn = Spawn.ground(spawn.position_ned_m)
         self.sim = Simulator(vehicle, rng_dyn, dyn_spawn, wind=config.wind())

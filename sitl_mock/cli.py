@@ -86,7 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
     clock.add_argument("--ekf-delay", type=float, default=0.5, metavar="S",
                        help="position estimate ready after S simulated seconds (default 0.5)")
     p.add_argument("--spawn", default="ground",
-                   help="ground | hover:x,y,z | throw:x,y,z,vx,vy,vz — NED metres and m/s (z = -altitude)")
+                   help="ground | hover:x,y,z | throw:x,y,z,vx,vy,vz[,qw,qx,qy,qz,p,q,r] — NED metres and m/s (z = "
+                        "-altitude); a throw's optional attitude (body FRD to NED quaternion) and body rates (FRD rad/s)")
     p.add_argument("--home", metavar="LAT,LON,ALT",
                    help="home = EKF origin: WGS-84 degrees and metres AMSL (default 47.397742,8.545594,488, PX4 SITL's); "
                    "sent as HOME_POSITION and GPS_GLOBAL_ORIGIN; south / west: --home=-35.363261,149.16523,584")
@@ -247,13 +248,7 @@ def config_to_args(config: MockConfig) -> list[str]:
         args += ["--lockstep", "--lockstep-dt", repr(c.lockstep_dt_s)]
     else:
         args += ["--speed", repr(c.speed)]
-    s = c.spawn
-    if s.kind == "ground":
-        args += ["--spawn", "ground:" + ",".join(repr(v) for v in s.position_ned_m[:2])]
-    elif s.kind == "hover":
-        args += ["--spawn", "hover:" + ",".join(repr(v) for v in s.position_ned_m)]
-    else:
-        args += ["--spawn", "throw:" + ",".join(repr(v) for v in s.position_ned_m + s.velocity_ned_m_s)]
+    args += ["--spawn", c.spawn.args()]
     args += ["--loss", repr(f.loss * 100), "--duplicate", repr(f.duplicate * 100), "--corrupt", repr(f.corrupt * 100),
              "--latency", repr(f.latency_s * 1000), "--jitter", repr(f.jitter_s * 1000)]
     if f.blackout_s:

@@ -15,6 +15,7 @@ from sitl_mock.dynamics import DEFAULT_VEHICLE, PRESET_NAMES, Push, Wind
 from sitl_mock.profiles import PROFILES
 
 MAX_WIND_M_S = 20.0  # beyond what a small multicopter flies in (and the tilt limits allow)
+MAX_SPAWN_RATE_RAD_S = 35.0  # ~2000 deg/s, a gyro's usual full scale: beyond any throw
 
 
 class MockConfigError(ValueError):
@@ -33,12 +34,16 @@ class SpawnSpec:
     kind ``ground``: landed, disarmed, at ``position_ned_m`` (z forced to 0).
     kind ``hover``: armed, in the profile's hold mode, hovering at ``position_ned_m``.
     kind ``throw``: armed with motors locked (like PX4 COM_THROW_EN), ballistic from
-    ``position_ned_m`` with ``velocity_ned_m_s`` until the client commands a mode.
+    ``position_ned_m`` with ``velocity_ned_m_s``, attitude ``q_ned_frd`` (body FRD to world NED,
+    (w, x, y, z)) and body rates ``rates_frd_rad_s`` until the client commands a mode. Only a throw
+    takes an attitude or body rates (a ground or hover spawn is level and at rest).
     """
 
     kind: str = "ground"
     position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     velocity_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    q_ned_frd: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    rates_frd_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def validate(self) -> None:
         if self.kind not in ("ground", "hover", "throw"):
@@ -49,10 +54,20 @@ class SpawnSpec:
                 raise MockConfigError(f"spawn.{name}", f"must be 3 finite numbers, got {value!r}")
         if self.kind != "ground" and self.position_ned_m[2] > 0.0:
             raise MockConfigError("spawn.position_ned_m", f"z must be <= 0 (NED, z = -altitude), got {self.position_ned_m[2]}")
+        q, w = self.q_ned_frd, self.rates_frd_rad_s
+        if len(q) != 4 or not all(math.isfinite(v) for v in q) or abs(math.sqrt(sum(v * v for v in q)) - 1.0) > 1e-6:
+            raise MockConfigError("spawn.q_ned_frd", f"must be a unit quaternion (w, x, y, z), got {q!r}")
+        if len(w) != 3 or not all(math.isfinite(v) for v in w):
+            raise MockConfigError("spawn.rates_frd_rad_s", f"must be 3 finite numbers, got {w!r}")
+        if math.sqrt(sum(v * v for v in w)) > MAX_SPAWN_RATE_RAD_S:
+            raise MockConfigError("spawn.rates_frd_rad_s", f"must be <= {MAX_SPAWN_RATE_RAD_S:g} rad/s in norm, got {w!r}")
+        if self.kind != "throw" and (tuple(q) != (1.0, 0.0, 0.0, 0.0) or any(w)):
+            raise MockConfigError("spawn", f"only a throw spawn takes an attitude or body rates, not {self.kind!r}")
 
     @staticmethod
     def parse(text: str) -> SpawnSpec:
-        """``ground`` | ``hover:x,y,z`` | ``throw:x,y,z,vx,vy,vz`` (NED: z = -altitude)."""
+        """``ground`` | ``hover:x,y,z`` | ``throw:x,y,z,vx,vy,vz[,qw,qx,qy,qz,p,q,r]`` (NED: z =
+        -altitude; the attitude body FRD to world NED, the body rates FRD rad/s)."""
         kind, _, rest = text.partition(":")
         try:
             values = tuple(float(v) for v in rest.split(",")) if rest else ()
@@ -69,9 +84,22 @@ class SpawnSpec:
             return SpawnSpec("hover", values)  # type: ignore[arg-type]
         if kind == "throw" and len(values) == 6:
             return SpawnSpec("throw", values[:3], values[3:])  # type: ignore[arg-type]
+        if kind == "throw" and len(values) == 13:
+            return SpawnSpec("throw", values[:3], values[3:6], values[6:10], values[10:])  # type: ignore[arg-type]
         raise MockConfigError(
-            "spawn", f"expected ground | hover:x,y,z | throw:x,y,z,vx,vy,vz (NED), got {text!r}"
+            "spawn", f"expected ground | hover:x,y,z | throw:x,y,z,vx,vy,vz[,qw,qx,qy,qz,p,q,r] (NED), got {text!r}"
         )
+
+    def args(self) -> str:
+        """The ``--spawn`` text that :meth:`parse` reads back into this spawn."""
+        if self.kind == "ground":
+            return "ground:" + ",".join(repr(v) for v in self.position_ned_m[:2])
+        if self.kind == "hover":
+            return "hover:" + ",".join(repr(v) for v in self.position_ned_m)
+        values = tuple(self.position_ned_m) + tuple(self.velocity_ned_m_s)
+        if tuple(self.q_ned_frd) != (1.0, 0.0, 0.0, 0.0) or any(self.rates_frd_rad_s):
+            values += tuple(self.q_ned_frd) + tuple(self.rates_frd_rad_s)
+        return "throw:" + ",".join(repr(v) for v in values)
 
 
 @dataclass(frozen=True)

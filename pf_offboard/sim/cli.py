@@ -14,6 +14,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     start.add_argument("--throw", metavar="X,Y,Z,VX,VY,VZ",
                        help="thrown start, world ENU (z up), m and m/s; motors locked until the throw trigger")  # fmt: skip
     parser.add_argument("--throw-height", type=float, metavar="H", help="throw activation height, m (default: config, else 2)")
+    parser.add_argument("--throw-attitude", metavar="QW,QX,QY,QZ",
+                        help="attitude at the throw: body FLU -> world ENU unit quaternion (default level, nose north)")
+    parser.add_argument("--throw-rates", metavar="P,Q,R", help="body rates at the throw, body FLU rad/s (default 0)")
+    parser.add_argument("--throw-engage-after", type=float, metavar="S",
+                        help="engage S simulated seconds after the throw (0: at once) instead of at the activation height")
     parser.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4", help="mock autopilot profile (default px4)")
     parser.add_argument("--vehicle", choices=PRESET_NAMES, default=DEFAULT_VEHICLE,
                         help=f"simulated airframe (default {DEFAULT_VEHICLE}): fast = paper-like ideal, px4-sih = PX4's SIH "
@@ -42,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
 
     from pf_offboard.errors import InputError
     from pf_offboard.logs._io import make_dir
-    from pf_offboard.sim.flight import SimSpec, parse_gusts, parse_push, parse_start, parse_throw, parse_wind, simulate
+    from pf_offboard.sim.flight import (SimSpec, parse_gusts, parse_push, parse_quaternion, parse_rates, parse_start,
+                                        parse_throw, parse_wind, simulate)
 
     from pf_offboard.shipped import resolve_config
 
@@ -51,6 +57,9 @@ def run(args: argparse.Namespace) -> int:
         start_enu_m=parse_start(args.start) if args.start else None,
         throw_enu=parse_throw(args.throw) if args.throw else None,
         throw_height_m=args.throw_height,
+        throw_q_enu_flu=parse_quaternion(args.throw_attitude) if args.throw_attitude is not None else None,
+        throw_body_rates_flu_rad_s=parse_rates(args.throw_rates) if args.throw_rates is not None else None,
+        throw_engage_after_s=args.throw_engage_after,
         autopilot=args.autopilot,
         vehicle=args.vehicle,
         wind_enu_m_s=parse_wind(args.wind) if args.wind is not None else None,

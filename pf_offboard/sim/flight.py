@@ -56,6 +56,11 @@ class SimSpec:
     start_enu_m: tuple[float, float, float] | None = None  # hover start (default: the path's start)
     throw_enu: tuple[float, ...] | None = None  # x, y, z, vx, vy, vz: thrown start, motors locked
     throw_height_m: float | None = None  # activation height of a throw (default: config, else 2 m)
+    # a throw's attitude, body FLU -> world ENU quaternion (w, x, y, z); default level, nose north
+    throw_q_enu_flu: tuple[float, float, float, float] | None = None
+    throw_body_rates_flu_rad_s: tuple[float, float, float] | None = None  # a throw's spin, body FLU
+    # engage this long after the release instead of at the activation height (0: at once)
+    throw_engage_after_s: float | None = None
     autopilot: str = "px4"  # px4 | ardupilot (the mock's profile)
     vehicle: str = "fast"  # a sitl_mock.dynamics preset (PRESET_NAMES); the CLI defaults to DEFAULT_VEHICLE
     wind_enu_m_s: tuple[float, float, float] | None = None  # constant wind, world ENU m/s (air velocity)
@@ -129,6 +134,27 @@ def parse_throw(text: str) -> tuple[float, ...]:
 
 
 MAX_WIND_M_S = 20.0
+MAX_THROW_RATE_RAD_S = 35.0  # ~2000 deg/s (a gyro's usual full scale): beyond any throw
+MAX_ENGAGE_AFTER_S = 60.0
+
+
+def parse_quaternion(text: str, flag: str = "--throw-attitude") -> tuple[float, float, float, float]:
+    """``w,x,y,z`` of a unit quaternion (a norm within 1e-3 of 1 is normalised)."""
+    return _unit_quaternion(_vec(text, 4, flag), flag)  # type: ignore[arg-type]
+
+
+def _unit_quaternion(q: tuple[float, ...], flag: str) -> tuple[float, float, float, float]:
+    if len(q) != 4 or not all(math.isfinite(v) for v in q):
+        raise InputError(flag, f"must be 4 finite numbers w,x,y,z, got {q!r}")
+    norm = math.sqrt(sum(v * v for v in q))
+    if abs(norm - 1.0) > 1e-3:
+        raise InputError(flag, f"must be a unit quaternion w,x,y,z, got norm {norm:.6g}")
+    return tuple(v / norm for v in q)  # type: ignore[return-value]
+
+
+def parse_rates(text: str, flag: str = "--throw-rates") -> tuple[float, float, float]:
+    """``p,q,r`` body rates (FLU, rad/s) of a thrown start."""
+    return _vec(text, 3, flag)  # type: ignore[return-value]
 
 
 def _numbers(text: str, flag: str, counts: tuple[int, ...], expected: str) -> tuple[float, ...]:
@@ -202,6 +228,7 @@ def _check(spec: SimSpec) -> None:
         _check_push(tuple(spec.push))
     if spec.start_enu_m is not None and spec.throw_enu is not None:
         raise InputError("--throw", "give either --start (hover) or --throw, not both")
+    _check_throw(spec)
     if spec.duration_s is not None and not (math.isfinite(spec.duration_s) and 0.0 < spec.duration_s <= 3600.0):
         raise InputError("--duration", f"must be in (0, 3600] s, got {spec.duration_s}")
     if spec.laps is not None and not (math.isfinite(spec.laps) and 0.0 < spec.laps <= 1000.0):
@@ -216,6 +243,48 @@ def _check(spec: SimSpec) -> None:
         raise InputError("--seed", f"must be an integer in [0, 2^63), got {spec.seed}")
     if not spec.name or "/" in spec.name or spec.name.startswith("."):
         raise InputError("--name", f"must be a plain file stem, got {spec.name!r}")
+
+
+def _check_throw(spec: SimSpec) -> None:
+    """A throw's attitude, spin and engagement time: only with a throw, finite, in range."""
+    extras = (("--throw-attitude", spec.throw_q_enu_flu), ("--throw-rates", spec.throw_body_rates_flu_rad_s),
+              ("--throw-engage-after", spec.throw_engage_after_s))  # fmt: skip
+    for flag, value in extras:
+        if value is not None and spec.throw_enu is None:
+            raise InputError(flag, "only a thrown start (--throw) takes it")
+    if spec.throw_q_enu_flu is not None:
+        _unit_quaternion(tuple(spec.throw_q_enu_flu), "--throw-attitude")
+    w = spec.throw_body_rates_flu_rad_s
+    if w is not None:
+        if len(w) != 3 or not all(math.isfinite(v) for v in w):
+            raise InputError("--throw-rates", f"must be 3 finite numbers p,q,r (rad/s), got {w!r}")
+        if math.hypot(*w) > MAX_THROW_RATE_RAD_S:
+            raise InputError("--throw-rates", f"spin {math.hypot(*w):.1f} rad/s is beyond a throw (<= {MAX_THROW_RATE_RAD_S:g} rad/s)")
+    t = spec.throw_engage_after_s
+    if t is not None:
+        if not (math.isfinite(t) and 0.0 <= t <= MAX_ENGAGE_AFTER_S):
+            raise InputError("--throw-engage-after", f"must be in [0, {MAX_ENGAGE_AFTER_S:g}] s, got {t}")
+        if spec.throw_height_m is not None:
+            raise InputError("--throw-engage-after", "give either --throw-height or --throw-engage-after, not both")
+
+
+class _NoLog:
+    """Stands in for a :class:`FlightLog` when a flight writes no files (sweeps: speed)."""
+
+    def __init__(self, paths: FlightLogPaths) -> None:
+        self.paths = paths
+
+    def __enter__(self) -> _NoLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def frame(self, frame_bytes: bytes | bytearray, unix_time_s: float) -> None:
+        return None
+
+    def step(self, record: StepRecord) -> None:
+        return None
 
 
 class _Codec:
@@ -236,9 +305,12 @@ class _Codec:
 
 
 class SimFlight:
-    """One deterministic in-process flight (see the module docstring). Call :meth:`run` once."""
+    """One deterministic in-process flight (see the module docstring). Call :meth:`run` once.
 
-    def __init__(self, config_path: str | Path, spec: SimSpec, out_dir: str | Path) -> None:
+    ``write_logs=False``: no ``.tlog`` / ``.csv`` / ``.yaml`` / summary file (the summary is still
+    computed; :attr:`SimResult.records` is then unavailable). Sweeps fly thousands this way."""
+
+    def __init__(self, config_path: str | Path, spec: SimSpec, out_dir: str | Path, write_logs: bool = True) -> None:
         from pf_offboard.app.bridge import EndSpec, LapCounter, ThrowTrigger
         from pf_offboard.app.encoders import Encoder
         from pf_offboard.app.estimator import Estimator
@@ -275,6 +347,7 @@ class SimFlight:
         self.throw = ThrowTrigger(height) if spec.throw_enu is not None else None
         self.duration_s = spec.duration_s if spec.duration_s is not None else (None if spec.laps else 20.0)
         self.out_dir = Path(out_dir)
+        self.write_logs = write_logs
         self.autopilot = self._make_autopilot(config)
         self.codec = _Codec(AUTOPILOT_SYSTEM_ID)  # a companion shares its vehicle's system id
         # bridge state
@@ -296,7 +369,10 @@ class SimFlight:
         if spec.throw_enu is not None:
             pos = frames.enu_to_ned(spec.throw_enu[:3])
             vel = frames.enu_to_ned(spec.throw_enu[3:])
-            spawn = SpawnSpec("throw", tuple(map(float, pos)), tuple(map(float, vel)))  # type: ignore[arg-type]
+            q_ned = (1.0, 0.0, 0.0, 0.0) if spec.throw_q_enu_flu is None else frames.quat_enu_flu_to_ned_frd(spec.throw_q_enu_flu)
+            w_frd = (0.0, 0.0, 0.0) if spec.throw_body_rates_flu_rad_s is None else frames.flu_to_frd(spec.throw_body_rates_flu_rad_s)
+            spawn = SpawnSpec("throw", tuple(map(float, pos)), tuple(map(float, vel)),  # type: ignore[arg-type]
+                              tuple(map(float, q_ned)), tuple(map(float, w_frd)))  # type: ignore[arg-type]
         else:
             start = spec.start_enu_m if spec.start_enu_m is not None else tuple(map(float, self.path.eval(0.0).sigma))
             if start[2] <= 0.2:
@@ -398,7 +474,11 @@ class SimFlight:
             self._send(log, step.setpoint)
             if self.phase == "following":
                 self.laps.update(step.record.eta1_m)
-        if self.phase == "waiting":
+        if self.phase == "waiting" and self.spec.throw_engage_after_s is not None:
+            if est.time_s >= self.spec.throw_engage_after_s - 1e-9:
+                self.phase = "engaging"
+                self._event = f"engaged {est.time_s:.2f} s after the throw"
+        elif self.phase == "waiting":
             assert self.throw is not None
             if self.throw.update(float(est.position_enu_m[2]), float(np.linalg.norm(est.velocity_enu_m_s))):
                 self.phase = "engaging"
@@ -429,7 +509,9 @@ class SimFlight:
             speed = max(abs(self.pipeline.speed_ref_m_s), 0.1) if math.isfinite(self.pipeline.speed_ref_m_s) else 1.0
             limit_s = 30.0 + 3.0 * (spec.laps or 1.0) * self.path.length_m / speed
         max_steps = int(math.ceil(limit_s / self.dt_s)) + 1
-        with FlightLog.open(self.out_dir, spec.name, config_path=self.config_path, config=self.config) as log:
+        opened: Any = (FlightLog.open(self.out_dir, spec.name, config_path=self.config_path, config=self.config) if self.write_logs
+                       else _NoLog(FlightLogPaths.in_dir(self.out_dir, spec.name)))  # fmt: skip
+        with opened as log:
             self._setup(log)
             for i in range(max_steps):
                 if self.progress is not None and i % 250 == 0:
@@ -447,7 +529,8 @@ class SimFlight:
         from pf_offboard.logs.summary import flight_report, write_report
 
         crashed = bool(self.autopilot.truth.crashed)
-        write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim"), paths.tlog.parent)
+        if self.write_logs:
+            write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim"), paths.tlog.parent)
         return SimResult(
             paths=paths,
             summary=summary,
@@ -459,6 +542,6 @@ class SimFlight:
         )
 
 
-def simulate(config_path: str | Path, spec: SimSpec, out_dir: str | Path) -> SimResult:
+def simulate(config_path: str | Path, spec: SimSpec, out_dir: str | Path, write_logs: bool = True) -> SimResult:
     """Fly one in-process flight and write its logs to ``out_dir`` (see :class:`SimFlight`)."""
-    return SimFlight(config_path, spec, out_dir).run()
+    return SimFlight(config_path, spec, out_dir, write_logs=write_logs).run()

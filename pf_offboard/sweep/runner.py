@@ -1,0 +1,297 @@
+"""One sweep flight as a self-contained task, and the executors that run many of them.
+
+A :class:`FlightTask` carries everything a flight needs (the config's YAML text, not a path, and
+the drawn start), so any process on any machine with ``pf_offboard`` installed runs it to the same
+row: :func:`run_flight` is a pure function of its task. The executors only differ in where the
+tasks run; rows come back sorted by (gain candidate, flight), so the table is identical for the
+same seed whatever the executor:
+
+- ``workers == 1`` and no cluster: in this process, one after the other;
+- ``workers > 1``: a :class:`concurrent.futures.ProcessPoolExecutor` on this machine's cores;
+- ``cluster``: a Dask cluster (:mod:`pf_offboard.sweep.engine`), the optional ``cluster`` extra.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from pf_offboard.errors import InputError
+from pf_offboard.sweep.gains import GainCandidate
+from pf_offboard.sweep.starts import Start
+
+# Fixed so a kept .tlog is the same file whoever runs the flight (and nothing reads the wall clock).
+EPOCH_UNIX_S = 1.7e9
+MAX_WORKERS = 256
+
+
+@dataclass(frozen=True)
+class FlightSettings:
+    """How each sweep flight is flown and judged.
+
+    Converged: at the first active step with cross-track <= ``tube_m`` (and, when given,
+    ``|eta2 - eta2_ref| <= speed_tol_m_s``) after which the cross-track never again exceeds
+    ``stay_m`` (a tube with hysteresis); the convergence time counts from activation (the first
+    setpoint). A flight succeeds when it converged at least ``settle_s`` before the end and never
+    touched the ground. Two tubes, not one: a realistic vehicle's estimate is noisy (px4-sih:
+    cross-track p99 ≈ 0.55 m in steady flight), so the last entry into one tight tube would
+    measure the noise, and one wide tube alone would call a fast start that merely passes the
+    path converged.
+    """
+
+    vehicle: str = "px4-sih"
+    autopilot: str = "px4"
+    output_mode: str | None = None  # default: the config's
+    duration_s: float = 15.0
+    rate_hz: float | None = None  # default: the config's
+    tube_m: float = 0.3
+    stay_m: float = 1.0
+    speed_tol_m_s: float | None = None  # None: the speed error is not judged
+    settle_s: float = 3.0
+
+    def validate(self) -> FlightSettings:
+        """Self, or an InputError naming the sweep flag that is out of range."""
+        if not (math.isfinite(self.duration_s) and 1.0 <= self.duration_s <= 600.0):
+            raise InputError("--duration", f"must be in [1, 600] s, got {self.duration_s}")
+        if not (math.isfinite(self.tube_m) and 0.01 <= self.tube_m <= 20.0):
+            raise InputError("--tube", f"must be in [0.01, 20] m, got {self.tube_m}")
+        if not (math.isfinite(self.stay_m) and self.tube_m <= self.stay_m <= 50.0):
+            raise InputError("--stay", f"must be in [--tube, 50] m, got {self.stay_m}")
+        if self.speed_tol_m_s is not None and not (math.isfinite(self.speed_tol_m_s) and 0.01 <= self.speed_tol_m_s <= 20.0):
+            raise InputError("--speed-tol", f"must be in [0.01, 20] m/s, got {self.speed_tol_m_s}")
+        if not (math.isfinite(self.settle_s) and 0.0 <= self.settle_s < self.duration_s):
+            raise InputError("--settle", f"must be in [0, --duration) s, got {self.settle_s}")
+        return self
+
+
+@dataclass(frozen=True)
+class FlightTask:
+    """One flight of a sweep: picklable, self-contained (see the module docstring)."""
+
+    start: Start
+    config_yaml: str  # the config's text (local way-points; gains already set for a candidate)
+    settings: FlightSettings
+    gains: GainCandidate | None = None
+    logs_dir: str | None = None  # write this flight's logs to <logs_dir>/flight-<index> (on the worker)
+
+    @property
+    def key(self) -> tuple[int, int]:
+        return (self.gains.id if self.gains is not None else -1, self.start.index)
+
+
+class _Judge:
+    """Streams a flight's steps into its summary and judges the approach (see FlightSettings)."""
+
+    def __init__(self, summary: Any, settings: FlightSettings) -> None:
+        self.summary = summary
+        self.tube_m = settings.tube_m
+        self.speed_tol_m_s = settings.speed_tol_m_s if settings.speed_tol_m_s is not None else math.inf
+        self.stay_m = settings.stay_m
+        self.activation_s: float | None = None
+        self.converged_s: float | None = None
+        self.last_out_s: float | None = None  # the last active step beyond stay_m
+        self.first_converged_s: float | None = None  # the first convergence, even if it did not hold
+        self.max_out_m = 0.0  # the largest cross-track beyond stay_m after the first convergence
+        self.max_after_m = 0.0  # cross-track maximum from convergence on
+        self._sum2 = 0.0
+        self._n = 0
+
+    @property
+    def rms_after_m(self) -> float:
+        """Cross-track RMS from convergence on (NaN before)."""
+        return math.sqrt(self._sum2 / self._n) if self._n else math.nan
+
+    def add(self, record: Any) -> None:
+        self.summary.add(record)
+        if not record.active:
+            return
+        if self.activation_s is None:
+            self.activation_s = record.time_s
+        ct = record.cross_track_m
+        if not ct <= self.stay_m:  # also NaN: out, start again
+            self.last_out_s = record.time_s
+            if self.first_converged_s is not None:
+                self.max_out_m = max(self.max_out_m, ct) if math.isfinite(ct) else math.inf
+            self.converged_s, self.max_after_m, self._sum2, self._n = None, 0.0, 0.0, 0
+            return
+        if self.converged_s is None:
+            if not (ct <= self.tube_m and abs(record.eta2_m_s - record.speed_ref_m_s) <= self.speed_tol_m_s):
+                return
+            self.converged_s = record.time_s
+            if self.first_converged_s is None:
+                self.first_converged_s = record.time_s
+        self.max_after_m = max(self.max_after_m, ct)
+        self._sum2 += ct * ct
+        self._n += 1
+
+    def result(self) -> Any:
+        return self.summary.result()
+
+
+def run_flight(task: FlightTask) -> dict[str, Any]:
+    """Fly one task in process (no logs unless ``task.logs_dir``) and return its table row."""
+    from pf_offboard.sim.flight import SimFlight, SimSpec
+
+    st, s = task.start, task.settings
+    name = f"flight-{st.index:06d}" + (f"-gains-{task.gains.id:03d}" if task.gains is not None else "")
+    spec = SimSpec(
+        throw_enu=st.position_enu_m + st.velocity_enu_m_s,
+        throw_q_enu_flu=st.q_enu_flu,
+        throw_body_rates_flu_rad_s=st.body_rates_flu_rad_s,
+        throw_engage_after_s=0.0,  # the drawn state is the state at activation
+        autopilot=s.autopilot,
+        vehicle=s.vehicle,
+        wind_enu_m_s=st.wind_enu_m_s,
+        output_mode=s.output_mode,
+        rate_hz=s.rate_hz,
+        duration_s=s.duration_s,
+        seed=st.sim_seed,
+        epoch_unix_s=EPOCH_UNIX_S,
+        name=name,
+    )
+    row: dict[str, Any] = task.gains.columns() if task.gains is not None else {}
+    row.update(st.columns())
+    with tempfile.TemporaryDirectory(prefix="pf-sweep-") as tmp:
+        config_path = Path(tmp) / "config.yaml"
+        config_path.write_text(task.config_yaml, encoding="utf-8")
+        out_dir = Path(task.logs_dir) / name if task.logs_dir is not None else Path(tmp)
+        try:
+            flight = SimFlight(config_path, spec, out_dir, write_logs=task.logs_dir is not None)
+            judge = _Judge(flight.summary, s)
+            flight.summary = judge  # type: ignore[assignment]
+            result = flight.run()
+        except Exception as exc:  # one broken flight is a row, not a lost sweep
+            row.update(_outcome(False, False, False, f"error: {type(exc).__name__}: {exc}", None, None, math.nan, math.nan, math.nan,
+                                math.nan))  # fmt: skip
+            return row
+    ground = result.crashed or result.reason.startswith("on the ground")
+    act, conv = judge.activation_s, judge.converged_s
+    reason = result.reason
+    if ground:
+        success = False
+    elif act is None or conv is None:
+        first, last = judge.first_converged_s, judge.last_out_s
+        if first is not None and last is not None:
+            success, reason = False, (f"{reason}; within {s.tube_m:g} m at {first:.2f} s, then beyond {s.stay_m:g} m "
+                                      f"(max {judge.max_out_m:.2f} m, last at {last:.2f} s) and not back by the end")  # fmt: skip
+        else:
+            success, reason = False, f"{reason}; never within {s.tube_m:g} m of the path"
+    elif result.sim_time_s - conv < s.settle_s - 1e-9:
+        success, reason = False, f"{reason}; converged only {result.sim_time_s - conv:.2f} s before the end"
+    else:
+        success = True
+    summ = result.summary
+    row.update(_outcome(success, bool(result.crashed), ground, reason, act, None if conv is None or act is None else conv - act,
+                        summ.whole_cross_track_max_m, judge.max_after_m if conv is not None else math.nan, judge.rms_after_m,
+                        result.sim_time_s))  # fmt: skip
+    return row
+
+
+def _outcome(success: bool, crashed: bool, ground: bool, reason: str, activation: float | None, conv: float | None,
+             ct_max: float | None, ct_max_after: float, ct_rms_after: float, sim_time_s: float) -> dict[str, Any]:  # fmt: skip
+    nan = math.nan
+    return {
+        "success": success,
+        "crashed": crashed,
+        "ground_contact": ground,
+        "activation_time_s": nan if activation is None else activation,
+        "convergence_time_s": nan if conv is None else conv,  # after activation; NaN if not converged
+        "cross_track_max_m": nan if ct_max is None else ct_max,  # over every active step
+        "cross_track_max_after_m": ct_max_after,  # from convergence on (NaN if not converged)
+        "cross_track_rms_after_m": ct_rms_after,
+        "sim_time_s": sim_time_s,
+        "reason": reason,
+    }
+
+
+# ---------------------------------------------------------------------------------- progress
+class Progress:
+    """A plain-text progress bar on ``stream`` (stderr): redrawn in place on a terminal, one line
+    per 10 % otherwise (logs, CI)."""
+
+    WIDTH = 30
+
+    def __init__(self, total: int, label: str = "sweep", stream: TextIO | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+        self.total = max(total, 1)
+        self.label = label
+        self.stream = stream if stream is not None else sys.stderr
+        self.clock = clock
+        self.t0 = clock()
+        self.done = 0
+        self.ok = 0
+        self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._last_decile = -1
+
+    def update(self, success: bool) -> None:
+        self.done += 1
+        self.ok += int(bool(success))
+        decile = 10 * self.done // self.total
+        if self._tty or decile != self._last_decile or self.done == self.total:
+            self._last_decile = decile
+            end = "\n" if (not self._tty or self.done == self.total) else ""
+            self.stream.write(("\r" if self._tty else "") + self.line() + end)
+            self.stream.flush()
+
+    def line(self) -> str:
+        elapsed = max(self.clock() - self.t0, 1e-9)
+        rate = self.done / elapsed
+        left = (self.total - self.done) / rate if rate > 0 else math.inf
+        filled = self.WIDTH * self.done // self.total
+        eta = f"{int(left // 60)}:{int(left % 60):02d}" if math.isfinite(left) else "?"
+        return (f"{self.label} [{'#' * filled}{'.' * (self.WIDTH - filled)}] {self.done}/{self.total} "
+                f"ok {100.0 * self.ok / max(self.done, 1):.1f} % {rate:.2f} flights/s ETA {eta}")  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------- executors
+def check_workers(workers: int) -> int:
+    if not 1 <= workers <= MAX_WORKERS:
+        raise InputError("--workers", f"must be in [1, {MAX_WORKERS}], got {workers}")
+    return workers
+
+
+def execute(tasks: Sequence[FlightTask], workers: int = 1, cluster: str | None = None,
+            progress: Progress | None = None, client: Any = None) -> list[dict[str, Any]]:  # fmt: skip
+    """Every task's row, sorted by (gain candidate, flight), whatever ran them (module docstring).
+
+    ``client``: an existing ``distributed.Client`` (tests, notebooks) instead of ``cluster``."""
+    check_workers(workers)
+    if cluster is not None or client is not None:
+        from pf_offboard.sweep.engine import run_on_dask
+
+        done = run_on_dask(tasks, run_flight, cluster, workers, client=client)
+    elif workers == 1:
+        done = ((t.key, run_flight(t)) for t in tasks)
+    else:
+        done = _pool(tasks, workers)
+    return _collect(done, len(tasks), progress)
+
+
+def _pool(tasks: Sequence[FlightTask], workers: int) -> Iterable[tuple[tuple[int, int], dict[str, Any]]]:
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = {pool.submit(run_flight, t): t.key for t in tasks}
+        try:
+            for fut in as_completed(futures):
+                yield futures[fut], fut.result()
+        finally:
+            for fut in futures:
+                fut.cancel()
+
+
+def _collect(done: Iterable[tuple[tuple[int, int], dict[str, Any]]], total: int,
+             progress: Progress | None) -> list[dict[str, Any]]:  # fmt: skip
+    rows: dict[tuple[int, int], dict[str, Any]] = {}
+    for key, row in done:
+        rows[key] = row
+        if progress is not None:
+            progress.update(bool(row["success"]))
+    if len(rows) != total:
+        raise RuntimeError(f"sweep: {total} flights submitted, {len(rows)} rows came back")
+    return [rows[k] for k in sorted(rows)]
