@@ -7,6 +7,8 @@ Sections:
   time), and the app's state-in → setpoint-out latency (median, p99 ms at 250 Hz).
 - ``memory``: resident memory of ``sim`` and ``fly`` over an hour of simulated time (``--quick``:
   10 minutes; ``--minutes N``: N): RSS after 1 simulated minute, at the end, growth in percent.
+- ``sweep``: ``pf-offboard sweep`` flights serially, on 2 local worker processes and on Dask in
+  local mode (speed-ups), and the CPU cost of writing each flight's logs (``--quick``: 8 flights).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ SECTIONS: tuple[tuple[str, str, str], ...] = (
     ("mavlink", "sitl_mock.bench_lockstep", "run_lockstep"),
     ("latency", "pf_offboard.bench.latency", "run"),
     ("memory", "pf_offboard.bench.memory", "run"),
+    ("sweep", "pf_offboard.bench.sweep", "run"),
 )
 
 
@@ -32,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--only",
         choices=[name for name, _, _ in SECTIONS],
         action="append",
-        help="run only this section (repeatable); default: all but memory (an hour of simulated flight)",
+        help="run only this section (repeatable); default: all but memory (an hour of simulated flight) and sweep",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     parser.add_argument("--quick", action="store_true", help="fewer samples (smoke run)")
@@ -55,7 +58,7 @@ def _section(module_name: str, func_name: str) -> Callable[..., dict[str, Any]]:
 
 
 # Long-running sections run only when asked for with --only (memory flies an hour of simulated time).
-ON_REQUEST = ("memory",)
+ON_REQUEST = ("memory", "sweep")
 
 
 def run(args: argparse.Namespace) -> int:

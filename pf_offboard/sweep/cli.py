@@ -107,9 +107,17 @@ def run(args: argparse.Namespace) -> int:
     spec = _spec(args)
     out = Path(make_dir(args.out, "--out"))
     logs_dir = out / "flights" if args.keep_logs else None
-    progress = None if args.quiet else Progress(0)
-    result = plan.run(args.config, spec, args.workers, args.cluster, progress, logs_dir)
+    progress = None if args.quiet else Progress(spec.flights * max(1, len(spec.gains)))
+    with report.Journal(out / report.JOURNAL_CSV) as journal:
+
+        def on_row(row: dict[str, object]) -> None:
+            journal(row)
+            if progress is not None:
+                progress(row)
+
+        result = plan.run(args.config, spec, args.workers, args.cluster, on_row, logs_dir)
     files = report.write_table(result.rows, out)
+    (out / report.JOURNAL_CSV).unlink()
     from dataclasses import asdict
 
     stats = report.summarize(result.rows, args.config, asdict(spec.settings))

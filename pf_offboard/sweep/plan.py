@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from pf_offboard.errors import InputError
 from pf_offboard.sweep.gains import GainCandidate
-from pf_offboard.sweep.runner import FlightSettings, FlightTask, Progress, execute
+from pf_offboard.sweep.runner import FlightSettings, FlightTask, execute
 from pf_offboard.sweep.starts import MAX_FLIGHTS, StartRanges, sample_start
 
 
@@ -86,13 +87,12 @@ def tasks(config_path: str | Path, spec: SweepSpec, logs_dir: str | Path | None 
 
 
 def run(config_path: str | Path, spec: SweepSpec, workers: int = 1, cluster: str | None = None,
-        progress: Progress | None = None, logs_dir: str | Path | None = None, client: Any = None) -> SweepResult:  # fmt: skip
+        on_row: Callable[[dict[str, Any]], None] | None = None, logs_dir: str | Path | None = None,
+        client: Any = None) -> SweepResult:  # fmt: skip
     """Run every flight (see :func:`pf_offboard.sweep.runner.execute`) and time it."""
     todo = tasks(config_path, spec, logs_dir)
-    if progress is not None:
-        progress.total = len(todo)
     t0 = time.perf_counter()
-    rows = execute(todo, workers, cluster, progress, client=client)
+    rows = execute(todo, workers, cluster, on_row, client=client)
     wall = time.perf_counter() - t0
     executor = (f"dask {cluster}" if cluster else "dask client") if (cluster or client is not None) else (
         "serial" if workers == 1 else f"process pool ({workers} workers)")  # fmt: skip

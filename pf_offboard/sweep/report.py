@@ -1,5 +1,6 @@
 """What a sweep leaves behind: the table, its statistics, and the region-of-attraction plot.
 
+- ``flights.partial.csv``: the rows as they come back, while the sweep runs;
 - ``flights.csv``: one row per flight (start, outcome; units in the column names), always;
   ``flights.parquet`` too when ``pyarrow`` is installed (it is not a dependency);
 - ``summary.json``: success rate, convergence-time percentiles over the successful flights, the
@@ -11,7 +12,6 @@
 from __future__ import annotations
 
 import csv
-import json
 import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
@@ -23,6 +23,32 @@ import numpy as np
 PERCENTILES = (50, 90, 95, 99)
 MAX_LISTED = 200  # failed flights listed one by one in summary.json (all are in the table)
 START_COLUMNS = ("distance_m", "speed_m_s", "tilt_deg", "rate_rad_s", "wind_m_s", "pos_enu_z_m", "vel_enu_z_m_s")
+
+
+JOURNAL_CSV = "flights.partial.csv"
+
+
+class Journal:
+    """Appends each row to a CSV as it comes back (completion order, flushed): a long sweep that
+    is stopped keeps what it flew. The sorted ``flights.csv`` replaces it at the end."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._fh = open(path, "w", newline="", encoding="utf-8")
+        self._writer: csv.DictWriter[str] | None = None
+
+    def __enter__(self) -> Journal:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._fh.close()
+
+    def __call__(self, row: Mapping[str, Any]) -> None:
+        if self._writer is None:
+            self._writer = csv.DictWriter(self._fh, fieldnames=list(row), lineterminator="\n")
+            self._writer.writeheader()
+        self._writer.writerow(row)
+        self._fh.flush()
 
 
 def write_table(rows: Sequence[Mapping[str, Any]], out_dir: Path, stem: str = "flights") -> list[Path]:
@@ -148,16 +174,10 @@ def lines(stats: Mapping[str, Any]) -> list[str]:
 
 
 def write_json(data: Mapping[str, Any], path: Path) -> None:
-    def clean(v: Any) -> Any:
-        if isinstance(v, float) and not math.isfinite(v):
-            return None
-        if isinstance(v, Mapping):
-            return {k: clean(x) for k, x in v.items()}
-        if isinstance(v, (list, tuple)):
-            return [clean(x) for x in v]
-        return v
+    """Strict JSON (NaN / inf as null), like the flight report."""
+    from pf_offboard.logs.summary import report_json
 
-    path.write_text(json.dumps(clean(data), indent=2) + "\n", encoding="utf-8")
+    path.write_text(report_json(dict(data)) + "\n", encoding="utf-8")
 
 
 def roa_plot(rows: Sequence[Mapping[str, Any]], path: Path, title: str) -> Path:

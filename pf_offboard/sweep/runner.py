@@ -228,6 +228,9 @@ class Progress:
         self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self._last_decile = -1
 
+    def __call__(self, row: dict[str, Any]) -> None:
+        self.update(bool(row["success"]))
+
     def update(self, success: bool) -> None:
         self.done += 1
         self.ok += int(bool(success))
@@ -256,9 +259,10 @@ def check_workers(workers: int) -> int:
 
 
 def execute(tasks: Sequence[FlightTask], workers: int = 1, cluster: str | None = None,
-            progress: Progress | None = None, client: Any = None) -> list[dict[str, Any]]:  # fmt: skip
+            on_row: Callable[[dict[str, Any]], None] | None = None, client: Any = None) -> list[dict[str, Any]]:  # fmt: skip
     """Every task's row, sorted by (gain candidate, flight), whatever ran them (module docstring).
 
+    ``on_row``: called with each row as it comes back (a :class:`Progress`, a journal);
     ``client``: an existing ``distributed.Client`` (tests, notebooks) instead of ``cluster``."""
     check_workers(workers)
     if cluster is not None or client is not None:
@@ -269,7 +273,7 @@ def execute(tasks: Sequence[FlightTask], workers: int = 1, cluster: str | None =
         done = ((t.key, run_flight(t)) for t in tasks)
     else:
         done = _pool(tasks, workers)
-    return _collect(done, len(tasks), progress)
+    return _collect(done, len(tasks), on_row)
 
 
 def _pool(tasks: Sequence[FlightTask], workers: int) -> Iterable[tuple[tuple[int, int], dict[str, Any]]]:
@@ -286,12 +290,12 @@ def _pool(tasks: Sequence[FlightTask], workers: int) -> Iterable[tuple[tuple[int
 
 
 def _collect(done: Iterable[tuple[tuple[int, int], dict[str, Any]]], total: int,
-             progress: Progress | None) -> list[dict[str, Any]]:  # fmt: skip
+             on_row: Callable[[dict[str, Any]], None] | None) -> list[dict[str, Any]]:  # fmt: skip
     rows: dict[tuple[int, int], dict[str, Any]] = {}
     for key, row in done:
         rows[key] = row
-        if progress is not None:
-            progress.update(bool(row["success"]))
+        if on_row is not None:
+            on_row(row)
     if len(rows) != total:
         raise RuntimeError(f"sweep: {total} flights submitted, {len(rows)} rows came back")
     return [rows[k] for k in sorted(rows)]

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from pf_offboard.errors import InputError
+from pf_offboard.frames import quat_multiply
 
 MAX_FLIGHTS = 1_000_000  # flight indices stay below the spawn key of the gain candidates
 GAINS_SPAWN_KEY = 1 << 32  # SeedSequence(seed, spawn_key=(GAINS_SPAWN_KEY,)) draws random gains
@@ -120,17 +121,6 @@ def _unit(rng: np.random.Generator) -> np.ndarray:
     return np.array([r * math.cos(a), r * math.sin(a), z])
 
 
-def _q_mul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
-    w0, x0, y0, z0 = a
-    w1, x1, y1, z1 = b
-    return (
-        w0 * w1 - x0 * x1 - y0 * y1 - z0 * z1,
-        w0 * x1 + x0 * w1 + y0 * z1 - z0 * y1,
-        w0 * y1 - x0 * z1 + y0 * w1 + z0 * x1,
-        w0 * z1 + x0 * y1 - y0 * x1 + z0 * w1,
-    )
-
-
 def sample_start(path: Any, ranges: StartRanges, seed: int, index: int) -> Start:
     """Draw flight ``index``'s start around ``path`` (a :class:`pf_offboard.path.Path`)."""
     from pf_offboard.path.projection import Projector
@@ -152,7 +142,7 @@ def sample_start(path: Any, ranges: StartRanges, seed: int, index: int) -> Start
     q_yaw = (math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw))
     h = math.sin(0.5 * tilt)
     q_tilt = (math.cos(0.5 * tilt), h * math.cos(axis_rad), h * math.sin(axis_rad), 0.0)  # about a world-horizontal axis
-    q = _q_mul(q_tilt, q_yaw)
+    q = quat_multiply(q_tilt, q_yaw)
     rates = rng.uniform(0.0, ranges.max_rate_rad_s) * _unit(rng)
     wind_speed = rng.uniform(0.0, ranges.max_wind_m_s)
     wind_dir = rng.uniform(0.0, 2.0 * math.pi)
