@@ -91,6 +91,7 @@ def _spec(args: argparse.Namespace) -> SweepSpec:
 
 
 def run(args: argparse.Namespace) -> int:
+    import os
     from pathlib import Path
 
     from pf_offboard.logs._io import make_dir
@@ -122,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
 
     stats = report.summarize(result.rows, args.config, asdict(spec.settings))
     summary = {**stats, "wall_time_s": result.wall_s, "executor": result.executor, "workers": args.workers,
-               "config": args.config, "settings": plan.settings_dict(spec)}  # fmt: skip
+               "cpu_count": os.cpu_count(), "load_average_at_end": list(os.getloadavg()), "config": args.config,
+               "settings": plan.settings_dict(spec)}  # fmt: skip
     print(f"pf-offboard sweep: {len(result.rows)} flights in {result.wall_s:.1f} s ({result.executor})")
     for line in report.lines(stats):
         print("  " + line)
