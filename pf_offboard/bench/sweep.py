@@ -22,7 +22,7 @@ CONFIG = Path(__file__).resolve().parents[1] / "configs" / "px4-sih.yaml"  # pac
 
 def run(quick: bool = False, workers: int = WORKERS) -> dict[str, Any]:
     from pf_offboard.sweep import engine, plan
-    from pf_offboard.sweep.runner import execute, run_flight
+    from pf_offboard.sweep.runner import execute, rows_equal, run_flight
 
     flights = 8 if quick else 40
     tasks = plan.tasks(CONFIG, plan.SweepSpec(flights=flights))
@@ -37,7 +37,7 @@ def run(quick: bool = False, workers: int = WORKERS) -> dict[str, Any]:
     pooled = execute(tasks, workers=workers)
     out["pool_wall_s"] = time.perf_counter() - t0
     out["pool_speedup"] = out["serial_wall_s"] / out["pool_wall_s"]
-    out["pool_rows_identical"] = pooled == serial
+    out["pool_rows_identical"] = rows_equal(pooled, serial)
 
     if engine.available():
         import logging
@@ -54,7 +54,7 @@ def run(quick: bool = False, workers: int = WORKERS) -> dict[str, Any]:
         out["dask_local_wall_s"] = done - started
         out["dask_local_speedup"] = out["serial_wall_s"] / out["dask_local_wall_s"]
         out["dask_local_speedup_with_startup"] = out["serial_wall_s"] / (done - t0)
-        out["dask_rows_identical"] = dask_rows == serial
+        out["dask_rows_identical"] = rows_equal(dask_rows, serial)
     else:
         out["dask_local"] = "not installed (pip install 'pf-offboard[cluster]')"
 

@@ -69,9 +69,9 @@ def write_table(rows: Sequence[Mapping[str, Any]], out_dir: Path, stem: str = "f
     return written
 
 
-def convergence_percentiles(rows: Sequence[Mapping[str, Any]]) -> dict[str, float]:
-    """Percentiles, mean and max of the convergence time (s) over the successful flights."""
-    times = np.array([r["convergence_time_s"] for r in rows if r["success"]], dtype=float)
+def convergence_percentiles(rows: Sequence[Mapping[str, Any]], column: str = "convergence_time_s") -> dict[str, float]:
+    """Percentiles, mean and max of a time column (s) over the successful flights."""
+    times = np.array([r[column] for r in rows if r["success"]], dtype=float)
     if times.size == 0:
         return {**{f"p{q}_s": math.nan for q in PERCENTILES}, "mean_s": math.nan, "max_s": math.nan}
     out = {f"p{q}_s": float(np.percentile(times, q)) for q in PERCENTILES}
@@ -143,6 +143,9 @@ def summarize(rows: Sequence[Mapping[str, Any]], config: str = "CONFIG", flight:
         "successes": n - len(failed),
         "success_rate": (n - len(failed)) / n if n else math.nan,
         "convergence_time": convergence_percentiles(rows),
+        # the first step within the inner tube, even if a later excursion beyond the outer one reset
+        # the convergence: the approach alone
+        "first_in_tube_time": convergence_percentiles(rows, "first_in_tube_time_s"),
         "failures_by_kind": dict(sorted(Counter(failure_kind(r) for r in failed).items())),
         "failed_start_ranges": _ranges(failed),
         "success_rate_by_start": success_by_bin(rows),
@@ -156,12 +159,13 @@ def summarize(rows: Sequence[Mapping[str, Any]], config: str = "CONFIG", flight:
 
 def lines(stats: Mapping[str, Any]) -> list[str]:
     """The summary for a terminal."""
-    c = stats["convergence_time"]
+    c, a = stats["convergence_time"], stats["first_in_tube_time"]
     out = [
         f"flights             {stats['flights']}, converged {stats['successes']} "
         f"({100.0 * stats['success_rate']:.1f} %)",
         "convergence time    " + ", ".join(f"p{q} {c[f'p{q}_s']:.2f} s" for q in PERCENTILES) + f", max {c['max_s']:.2f} s"
         " (after activation, successful flights)",
+        "first in the tube   " + ", ".join(f"p{q} {a[f'p{q}_s']:.2f} s" for q in PERCENTILES) + f", max {a['max_s']:.2f} s",
     ]
     if stats["failures_by_kind"]:
         out.append("failures            " + ", ".join(f"{k}: {v}" for k, v in stats["failures_by_kind"].items()))

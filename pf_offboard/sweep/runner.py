@@ -169,6 +169,7 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
         except Exception as exc:  # one broken flight is a row, not a lost sweep
             row.update(_outcome(False, False, False, f"error: {type(exc).__name__}: {exc}", None, None, math.nan, math.nan, math.nan,
                                 math.nan))  # fmt: skip
+            row["first_in_tube_time_s"] = math.nan
             return row
     ground = result.crashed or result.reason.startswith("on the ground")
     act, conv = judge.activation_s, judge.converged_s
@@ -190,6 +191,8 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
     row.update(_outcome(success, bool(result.crashed), ground, reason, act, None if conv is None or act is None else conv - act,
                         summ.whole_cross_track_max_m, judge.max_after_m if conv is not None else math.nan, judge.rms_after_m,
                         result.sim_time_s))  # fmt: skip
+    first = judge.first_converged_s
+    row["first_in_tube_time_s"] = first - act if (first is not None and act is not None) else math.nan
     return row
 
 
@@ -274,6 +277,16 @@ def execute(tasks: Sequence[FlightTask], workers: int = 1, cluster: str | None =
     else:
         done = _pool(tasks, workers)
     return _collect(done, len(tasks), on_row)
+
+
+def rows_equal(a: Sequence[dict[str, Any]], b: Sequence[dict[str, Any]]) -> bool:
+    """Tables equal value for value, NaN equal to NaN (``==`` says NaN != NaN once a row has
+    crossed a process boundary: only the identical NaN object compares equal)."""
+
+    def same(x: Any, y: Any) -> bool:
+        return x == y or (isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y))
+
+    return len(a) == len(b) and all(ra.keys() == rb.keys() and all(same(ra[k], rb[k]) for k in ra) for ra, rb in zip(a, b))
 
 
 def _pool(tasks: Sequence[FlightTask], workers: int) -> Iterable[tuple[tuple[int, int], dict[str, Any]]]:

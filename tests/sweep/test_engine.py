@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from pf_offboard.errors import InputError
 from pf_offboard.sweep import engine, plan
-from pf_offboard.sweep.runner import execute
+from pf_offboard.sweep.runner import execute, rows_equal
 
 from .helpers import PAPER, tiny_spec
 
@@ -32,8 +34,10 @@ def test_without_the_extra_the_error_says_how_to_install(monkeypatch: pytest.Mon
 def test_dask_gives_the_same_rows_as_the_local_executor() -> None:
     distributed = pytest.importorskip("distributed")
     tasks = plan.tasks(PAPER, tiny_spec(3))
+    tasks.append(dataclasses.replace(tasks[0], start=dataclasses.replace(tasks[0].start, index=3), config_yaml="path: 3\n"))
     # threads, not processes: the engine path (map, as_completed, ordering) without process start-up
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
         rows = execute(tasks, client=client)
-    assert rows == execute(tasks, workers=1)
+    serial = execute(tasks, workers=1)
+    assert rows_equal(rows, serial) and serial[3]["reason"].startswith("error")

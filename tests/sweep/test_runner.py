@@ -12,7 +12,7 @@ import pytest
 
 from pf_offboard.errors import InputError
 from pf_offboard.sweep import plan
-from pf_offboard.sweep.runner import FlightSettings, Progress, _Judge, execute, run_flight
+from pf_offboard.sweep.runner import FlightSettings, Progress, _Judge, execute, rows_equal, run_flight
 
 from .helpers import PAPER, tiny_spec
 
@@ -22,17 +22,25 @@ def tasks():  # type: ignore[no-untyped-def]
     return plan.tasks(PAPER, tiny_spec(4))
 
 
+def _broken(task, index: int):  # type: ignore[no-untyped-def]
+    """A task whose flight fails (a row full of NaN), as flight ``index``."""
+    return dataclasses.replace(task, start=dataclasses.replace(task.start, index=index), config_yaml="path: 3\n")
+
+
 @pytest.fixture(scope="module")
 def serial_rows(tasks):  # type: ignore[no-untyped-def]
     return execute(tasks, workers=1)
 
 
 def test_serial_and_process_pool_give_the_same_rows(tasks, serial_rows) -> None:  # type: ignore[no-untyped-def]
-    pooled = execute(tasks[::-1], workers=2)  # submitted in another order: rows still sorted
-    assert pooled == serial_rows
+    broken = _broken(tasks[0], 4)
+    pooled = execute([broken, *tasks[::-1]], workers=2)  # submitted in another order: rows still sorted
+    assert rows_equal(pooled, [*serial_rows, run_flight(broken)])
+    assert not rows_equal(pooled[:4], serial_rows[::-1])
     assert [r["flight"] for r in serial_rows] == [0, 1, 2, 3]
     assert all(r["activation_time_s"] < 0.1 for r in serial_rows)  # engaged at the drawn state
     assert all(not r["reason"].startswith("error") for r in serial_rows)
+    assert all(r["first_in_tube_time_s"] <= r["convergence_time_s"] for r in serial_rows if r["success"])
 
 
 def test_a_sweep_of_more_flights_repeats_the_first_ones(serial_rows) -> None:  # type: ignore[no-untyped-def]
