@@ -199,8 +199,9 @@ def roa_plot(rows: Sequence[Mapping[str, Any]], path: Path, title: str) -> Path:
         sc = ax.scatter([r["distance_m"] for r in ok], [r["speed_m_s"] for r in ok], c=[r["convergence_time_s"] for r in ok],
                         s=14, cmap="viridis", label=f"converged ({len(ok)})")  # fmt: skip
         fig.colorbar(sc, ax=ax, label="convergence time (s)")
-        ax2.scatter([r["distance_m"] for r in ok], [r["convergence_time_s"] for r in ok], s=10, c=[r["speed_m_s"] for r in ok],
-                    cmap="plasma")  # fmt: skip
+        sc2 = ax2.scatter([r["distance_m"] for r in ok], [r["convergence_time_s"] for r in ok], s=10,
+                          c=[r["speed_m_s"] for r in ok], cmap="plasma")  # fmt: skip
+        fig.colorbar(sc2, ax=ax2, label="initial speed (m/s)")
     if bad:
         ax.scatter([r["distance_m"] for r in bad], [r["speed_m_s"] for r in bad], marker="x", color="red", s=30,
                    label=f"failed ({len(bad)})")  # fmt: skip
@@ -209,7 +210,7 @@ def roa_plot(rows: Sequence[Mapping[str, Any]], path: Path, title: str) -> Path:
     ax.set_title(title)
     ax.legend(loc="upper right")
     ax2.set_xlabel("initial distance from the path (m)")
-    ax2.set_ylabel("convergence time (s), colour: initial speed")
+    ax2.set_ylabel("convergence time (s)")
     ax2.set_title("convergence time vs distance (converged flights)")
     for a in (ax, ax2):
         a.grid(True, alpha=0.3)
