@@ -184,7 +184,7 @@ def write_json(data: Mapping[str, Any], path: Path) -> None:
     path.write_text(report_json(dict(data)) + "\n", encoding="utf-8")
 
 
-def roa_plot(rows: Sequence[Mapping[str, Any]], path: Path, title: str) -> Path:
+def roa_plot(rows: Sequence[Mapping[str, Any]], path: Path, title: str, dpi: int = 110) -> Path:
     """Region of attraction: initial distance vs speed coloured by convergence time (failures: red
     crosses), and convergence time vs initial distance. PNG, matplotlib's Agg backend."""
     import matplotlib
@@ -214,6 +214,6 @@ def roa_plot(rows: Sequence[Mapping[str, Any]], path: Path, title: str) -> Path:
     ax2.set_title("convergence time vs distance (converged flights)")
     for a in (ax, ax2):
         a.grid(True, alpha=0.3)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
