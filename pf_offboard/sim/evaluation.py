@@ -42,7 +42,8 @@ from pf_offboard.path import Path as SplinePath
 from pf_offboard.sim.flight import SimSpec, simulate
 
 ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_CONFIG = ROOT / "configs" / "arducopter.yaml"
+# the shipped config (package data: found from an installed copy too)
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "arducopter.yaml"
 DEFAULT_VEHICLE = "arducopter"
 # What each mock preset stands for (the document says which one it flew) and its autopilot profile.
 VEHICLES: dict[str, tuple[str, str]] = {
@@ -428,6 +429,8 @@ HAND_MEASURED_MARK = "## Real SITLs (hand-measured, not generated)"
 
 
 def _rel(p: Path) -> str:
+    if Path(p).resolve().parent == DEFAULT_CONFIG.parent:
+        return f"configs/{Path(p).name}"  # a shipped config (configs/ in the repository)
     try:
         return str(Path(p).absolute().relative_to(ROOT))
     except ValueError:

@@ -20,7 +20,7 @@ MAX_TILT_DEG = 60.0  # safety.max_tilt_deg (default)
 def test_jitter_in_rates_mode_flies_or_ends_safely(tmp_path, profile: str) -> None:
     config = write_config(tmp_path, output_mode="rates")
     truth_log = tmp_path / "truth.csv"
-    flags = ["--airborne", "--output", "rates", "--duration", "10"]
+    flags = ["--airborne", "--output", "rates", "--duration", "6"]
     if profile == "ardupilot":
         flags.append("--set-guid-options")
     with spawn(own_clock(profile, hover(), truth_log, jitter_s=0.05)) as mock:
