@@ -71,6 +71,12 @@ class PathConfig:
     moving_frame: str = "auto"
     geodetic: GeodeticSource | None = None
 
+    def spline(self) -> Any:
+        """The :class:`pf_offboard.path.Path` through these way-points (world ENU)."""
+        from pf_offboard.path import Path
+
+        return Path.from_waypoints(self.waypoints_enu_m, closed=self.closed, frame=self.moving_frame)
+
 
 @dataclass(frozen=True)
 class FlightConfig:

@@ -154,12 +154,11 @@ def _check_args(args: argparse.Namespace) -> None:
 def envelope_fence(config: Any) -> Any:
     """The safety fence for this config's path (pf_offboard.safety); InputError (exit 2) if the
     path itself leaves it or dips below the floor: such a flight is refused before any traffic."""
-    from pf_offboard.path import Path as SplinePath
     from pf_offboard.safety import SafetyConfig, check_path, fence_for_path
 
     safety = getattr(config, "safety", None) or SafetyConfig()
     p = config.path
-    path = SplinePath.from_waypoints(p.waypoints_enu_m, closed=p.closed, frame=p.moving_frame)
+    path = p.spline()
     n = max(2, math.ceil(path.lam_max / 0.05) + 1)  # every 5 cm or finer
     points = [path.eval_floats(path.lam_max * i / (n - 1))[:3] for i in range(n)]
     fence = fence_for_path(safety, points)

@@ -78,6 +78,22 @@ class _Evaluation(NamedTuple):
     dist: float
 
 
+def _approach_weight(tube: float, dist_m: float) -> float:
+    """Weight of the approach fallback before clipping to [0, 1]: the larger of the tube ramp
+    (TUBE_INNER..TUBE_OUTER) and the distance ramp (FAR_INNER_M..FAR_OUTER_M)."""
+    return max((tube - TUBE_INNER) / (TUBE_OUTER - TUBE_INNER), (dist_m - FAR_INNER_M) / (FAR_OUTER_M - FAR_INNER_M))
+
+
+def _blended_speed(eta2: float, w: float, tan: Vec, v: Vec) -> float:
+    """eta2 (m/s) faded into the speed along the unit tangent ``tan`` with the approach weight
+    ``w`` in [0, 1], as the law fades its inputs: far from the path (w = 1) the exact eta2 is
+    singular (1 - kappa xi1 -> 0) and only the tangential speed is used."""
+    if w <= 0.0:
+        return eta2
+    v_t = tan[0] * v[0] + tan[1] * v[1] + tan[2] * v[2]
+    return v_t if w >= 1.0 else (1.0 - w) * eta2 + w * v_t
+
+
 def evaluate_terms(path: Path, lam: float, position: ArrayLike, velocity: ArrayLike) -> ExactTerms:
     """T(x), alpha, beta at a given closest-point parameter ``lam`` (no projection, no state)."""
     s = path.eval_floats(lam)
@@ -181,10 +197,9 @@ class PathFollower:
     def from_config(cls, config: Config | str | os.PathLike[str]) -> PathFollower:
         """Build the path and follower from a YAML file (or a loaded :class:`~pf_offboard.config.Config`)."""
         from pf_offboard.config import Config, load_config
-        from pf_offboard.path import Path
 
         cfg = config if isinstance(config, Config) else load_config(config)
-        path = Path.from_waypoints(cfg.path.waypoints_enu_m, closed=cfg.path.closed, frame=cfg.path.moving_frame)
+        path = cfg.path.spline()
         comp = None
         if cfg.compensation.enabled:
             c = cfg.compensation
@@ -274,10 +289,7 @@ class PathFollower:
         # blend weight of the approach fallback
         r = (y[0] - s[0], y[1] - s[1], y[2] - s[2])
         dist = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-        w = (terms.tube - TUBE_INNER) / (TUBE_OUTER - TUBE_INNER)
-        w_far = (dist - FAR_INNER_M) / (FAR_OUTER_M - FAR_INNER_M)
-        if w_far > w:
-            w = w_far
+        w = _approach_weight(terms.tube, dist)
         past_end = False
         if not self._closed and (lam <= 0.0 or lam >= self._lam_max):
             out = terms.tangential_offset_m if lam > 0.0 else -terms.tangential_offset_m
@@ -438,7 +450,7 @@ class PathFollower:
         thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
         tilt, thrust_sat = law.thrust_set.active(f)
         psi, dpsi = self._yaw.evaluate(st.eta1, tan, s_ss)
-        eta2 = st.eta2 if w == 0.0 else (1.0 - w) * st.eta2 + w * (tan[0] * v[0] + tan[1] * v[1] + tan[2] * v[2])
+        eta2 = _blended_speed(st.eta2, w, tan, v)
         yaw_rate = dpsi * eta2
         axes = attitude_from_thrust(f, psi)
         q = quaternion_from_axes(*axes)
@@ -451,16 +463,11 @@ class PathFollower:
             sm = self._eval(lam)
             dist = math.sqrt((y_meas[0] - sm[0]) ** 2 + (y_meas[1] - sm[1]) ** 2 + (y_meas[2] - sm[2]) ** 2)
             mt = evaluate_terms(self.path, lam, y_meas, v_meas)
-            st = mt.state
-            # Far from the path (outside the tube) the exact eta2 is singular (1 - kappa xi1 -> 0):
-            # report the speed along the tangent there, blended as the law blends its inputs.
-            w_m = max((mt.tube - TUBE_INNER) / (TUBE_OUTER - TUBE_INNER), (dist - FAR_INNER_M) / (FAR_OUTER_M - FAR_INNER_M))
-            if w_m > 0.0:
-                w_m = min(w_m, 1.0)
-                t_m = sm[3:6]
-                n_t = math.sqrt(t_m[0] * t_m[0] + t_m[1] * t_m[1] + t_m[2] * t_m[2])
-                v_t = (t_m[0] * v_meas[0] + t_m[1] * v_meas[1] + t_m[2] * v_meas[2]) / n_t
-                st = st._replace(eta2=v_t if w_m >= 1.0 else (1.0 - w_m) * st.eta2 + w_m * v_t)
+            # report eta2 faded into the tangential speed outside the tube, as the law does
+            t_m = sm[3:6]
+            n_t = math.sqrt(t_m[0] * t_m[0] + t_m[1] * t_m[1] + t_m[2] * t_m[2])
+            w_m = min(_approach_weight(mt.tube, dist), 1.0)
+            st = mt.state._replace(eta2=_blended_speed(mt.state.eta2, w_m, (t_m[0] / n_t, t_m[1] / n_t, t_m[2] / n_t), v_meas))
             # integrate the measured errors only in the exact tube and while nothing saturates
             free = w == 0.0 and not (res.tangential or res.transversal or tilt or thrust_sat)
             comp.integrate(t_s, eta2_ref - st.eta2, st.xi1, st.phi1, free)

@@ -117,7 +117,7 @@ def judge(log_dir: Path, config: str, skip_s: float = 8.0) -> TruthReport:
     offset = diff.mean(axis=0)  # EKF origin vs the truth's first sample: not an error
     err = diff - offset
     cfg = load_config(config)
-    path = SplinePath.from_waypoints(cfg.path.waypoints_enu_m, closed=cfg.path.closed, frame=cfg.path.moving_frame)
+    path = cfg.path.spline()
     ct_est = _cross_track(path, est.ned_m[sel])
     ct_tru = _cross_track(path, truth_at + offset)
     rms = np.sqrt((err**2).mean(axis=0))

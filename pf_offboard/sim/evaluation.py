@@ -243,7 +243,7 @@ def run(settings: EvaluationSettings, out_dir: Path, progress: Callable[[str], N
     cfg = load_config(settings.config)
     if not cfg.path.closed:
         raise InputError("config", "the evaluation laps a closed path")
-    path = SplinePath.from_waypoints(cfg.path.waypoints_enu_m, closed=True, frame=cfg.path.moving_frame)
+    path = cfg.path.spline()
     length = path.length_m
     speed = cfg.speed_m_s
     configs = {c: _write_config(settings.config, c, out_dir / "configs") for c in CONTROLLERS}
@@ -288,7 +288,7 @@ def plot_push(ev: Evaluation, png: Path, after_s: float = AFTER_PUSH_S) -> None:
     import matplotlib.pyplot as plt
 
     cfg = load_config(ev.settings.config)
-    path = SplinePath.from_waypoints(cfg.path.waypoints_enu_m, closed=True, frame=cfg.path.moving_frame)
+    path = cfg.path.spline()
     xyz = np.array([path.eval(v).sigma for v in np.linspace(0.0, path.lam_max, 600)])
     colours = {"path_following": "tab:blue", "trajectory_tracking": "tab:red"}
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5.2))
