@@ -153,6 +153,7 @@ class Autopilot:
         self._pending: list[tuple[float, str, object]] = []
         if f.takeover_at_s is not None:
             self._pending.append((f.takeover_at_s, "takeover", f.takeover_mode))
+        self._takeover_above_m = f.takeover_above_m  # None once fired (or never set)
         if f.estimator_reset_at_s is not None:
             self._pending.append((f.estimator_reset_at_s, "reset", f.estimator_reset_ned_m))
         if f.gust_at_s is not None:
@@ -672,12 +673,20 @@ class Autopilot:
         return out
 
     def _run_scheduled(self, out: list[Out]) -> None:
+        above = self._takeover_above_m
+        if above is not None and self.armed:
+            height_m = float(self.config.spawn.position_ned_m[2] - self.truth.position_ned_m[2])
+            if height_m > above:
+                self._takeover_above_m = None
+                self._pending = [item for item in self._pending if item[1] != "takeover"]  # whichever first
+                out += self.inject_takeover(self.config.faults.takeover_mode)
         due = [item for item in self._pending if item[0] <= self.time_s]
         if not due:
             return
         self._pending = [item for item in self._pending if item[0] > self.time_s]
         for _, kind, arg in due:
             if kind == "takeover":
+                self._takeover_above_m = None  # whichever first
                 out += self.inject_takeover(arg)  # type: ignore[arg-type]
             elif kind == "reset":
                 out += self.inject_estimator_reset(arg)  # type: ignore[arg-type]

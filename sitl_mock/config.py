@@ -121,6 +121,10 @@ class FaultConfig:
     estimator_reset_ned_m: tuple[float, float, float] = (2.0, -1.0, 0.0)
     takeover_at_s: float | None = None
     takeover_mode: str | None = None  # default: the profile's hold mode (POSCTL-like position hold)
+    # the takeover instead (or as well: whichever comes first) the first time the armed vehicle is
+    # above this height (m above its spawn's ground): "the operator takes over during the climb"
+    # without depending on how long the client took to arm (a timed fault did, under CI load)
+    takeover_above_m: float | None = None
     gust_at_s: float | None = None
     gust_ned_m_s: tuple[float, float, float] = (3.0, 0.0, 0.0)
     gust_duration_s: float = 1.0
@@ -175,6 +179,8 @@ class FaultConfig:
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value >= 0.0):
                 raise MockConfigError(f"faults.{name}", f"must be a finite time >= 0 s, got {value}")
+        if self.takeover_above_m is not None and not (math.isfinite(self.takeover_above_m) and self.takeover_above_m > 0.0):
+            raise MockConfigError("faults.takeover_above_m", f"must be a finite height > 0 m, got {self.takeover_above_m}")
         if not (math.isfinite(self.clock_at_start_s) and 0.0 <= self.clock_at_start_s <= 1e6):
             raise MockConfigError("faults.clock_at_start_s", f"must be in [0, 1e6] s, got {self.clock_at_start_s}")
         at = self.clock_jump_at_s

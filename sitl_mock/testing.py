@@ -5,17 +5,34 @@ Used by ``tests/sitl_mock`` and usable by the app's tests. Loopback only.
 
 from __future__ import annotations
 
+import os
 import socket
 import time
 
 from pymavlink.dialects.v20 import common as mavlink
 
 
+# Ports handed out below the kernel's ephemeral range (Linux default 32768-60999): a port taken
+# from port 0 and released could be handed straight back to the next socket bound to port 0 (the
+# mock's own, in the same test), and the client listening on it then fails with "Address already in
+# use" (seen in CI). Below the range only an explicit bind can take it.
+_PORT_LOW, _PORT_HIGH = 20000, 32000
+_next_port = [_PORT_LOW + (os.getpid() * 7919) % (_PORT_HIGH - _PORT_LOW)]
+
+
 def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that was free a moment ago (for a client to listen on)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A UDP port on 127.0.0.1 that is free now and outside the ephemeral range (for a client to
+    listen on). Successive calls in one process walk the range, so two never return the same port."""
+    for _ in range(_PORT_HIGH - _PORT_LOW):
+        port = _next_port[0]
+        _next_port[0] = _PORT_LOW + (port + 1 - _PORT_LOW) % (_PORT_HIGH - _PORT_LOW)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:  # taken by another process: try the next one
+                continue
+            return port
+    raise RuntimeError(f"no free UDP port in {_PORT_LOW}-{_PORT_HIGH} on 127.0.0.1")
 
 
 def command_long(command: int, *params: float, target_system: int = 1) -> mavlink.MAVLink_command_long_message:

@@ -37,7 +37,9 @@ def _check(outcome, mock, log_dir, phase: str) -> None:
 
 def test_takeover_during_takeoff(tmp_path) -> None:
     config = write_config(tmp_path)
-    with run_in_thread(lockstep("px4", "ground", takeover_at_s=3.5, takeover_mode="POSCTL")) as mock:
+    # taken over once 0.5 m up: a timed takeover (3.5 s) found the vehicle still on the ground
+    # when the client took long to arm under CI load
+    with run_in_thread(lockstep("px4", "ground", takeover_above_m=0.5, takeover_mode="POSCTL")) as mock:
         outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--takeoff", "2", "--duration", "5")
         _check(outcome, mock, tmp_path / "log", "takeoff")
         assert 0.3 < -mock.call(lambda m: m.truth.position_ned_m[2]) < 2.0  # it was climbing, not yet there

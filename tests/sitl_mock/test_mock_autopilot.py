@@ -252,6 +252,28 @@ def test_scheduled_takeover_ignores_offboard_setpoints() -> None:
     assert abs(ap.truth.velocity_ned_m_s[0]) < 0.5
 
 
+def test_takeover_above_a_height_fires_once_in_the_climb() -> None:
+    """takeover_above_m: the operator takes over the first time the vehicle is above 1 m over its
+    spawn (a hover at 10 m climbing), not before, and only once; a timed takeover set later no longer fires."""
+    ap = make("px4", spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)),
+              faults=FaultConfig(takeover_above_m=1.0, takeover_at_s=30.0))  # fmt: skip
+    run(ap, 0.4, accel_setpoint(0, 0, 0))
+    assert cmd(ap, mavlink.MAV_CMD_DO_SET_MODE, 1, 6) == mavlink.MAV_RESULT_ACCEPTED
+    run(ap, 0.3, accel_setpoint(0, 0, -2.0))
+    assert ap.mode.name == "OFFBOARD" and -ap.truth.position_ned_m[2] - 10.0 < 1.0
+    run(ap, 2.0, accel_setpoint(0, 0, -2.0))
+    assert ap.mode.name == "POSCTL"
+    assert cmd(ap, mavlink.MAV_CMD_DO_SET_MODE, 1, 6) == mavlink.MAV_RESULT_ACCEPTED  # back to OFFBOARD
+    run(ap, 30.0, accel_setpoint(0, 0, 0))
+    assert ap.mode.name == "OFFBOARD"  # fired once; the timed one was dropped with it
+
+
+def test_takeover_above_m_is_validated() -> None:
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="faults.takeover_above_m"):
+            FaultConfig(takeover_above_m=bad).validate()
+
+
 # --------------------------------------------------------------------------------------------
 # Setpoint semantics
 # --------------------------------------------------------------------------------------------
