@@ -35,8 +35,8 @@ from pf_offboard.geo import GeoPoint, geodetic_to_enu
 
 ALTITUDE_REFERENCES = ("relative_home", "amsl")
 SUFFIXES = (".plan", ".waypoints", ".csv", ".geojson", ".json", ".kml")
-# Until the safety: section's geofence lands, a geodetic path whose local way-points are farther
-# than this from the origin is refused (a wrong origin or a swapped lat/lon is kilometres off).
+# A geodetic path whose local way-points are farther than this from the origin is refused (a wrong
+# origin or a swapped lat/lon is kilometres off), whatever the safety: fence (checked as well).
 MAX_DISTANCE_FROM_ORIGIN_M = 1000.0
 
 MAV_CMD_NAV_WAYPOINT = 16

@@ -55,6 +55,22 @@ def test_defaults_for_everything_but_the_path():
     assert cfg.path.frame == "enu" and cfg.path.moving_frame == "auto"
 
 
+def test_velocity_correction_is_on_by_default_and_null_turns_it_off():
+    import argparse
+
+    from pf_offboard.app.fly import flight_settings
+
+    no_flags = argparse.Namespace(output=None, end_action=None)
+    assert flight_settings(parse_config(minimal()), no_flags).velocity_correction_s == 0.5
+    data = minimal()
+    data["flight"] = {"velocity_correction_s": None}
+    assert parse_config(data).flight.velocity_correction_s is None
+    assert flight_settings(parse_config(data), no_flags).velocity_correction_s is None
+    data["flight"] = {"velocity_correction_s": 0.01}
+    with pytest.raises(ConfigError, match="flight.velocity_correction_s"):
+        parse_config(data)
+
+
 def test_ned_waypoints_and_yaw_are_converted():
     ned = [[p[1], p[0], -p[2]] for p in SQUARE]
     cfg = parse_config(
@@ -193,6 +209,7 @@ NUMERIC_FIELDS = [
     ("flight", "takeoff_altitude_m"),
     ("flight", "throw_activation_height_m"),
     ("flight", "attitude_time_constant_s"),
+    ("flight", "velocity_correction_s"),
 ]
 
 
@@ -228,7 +245,7 @@ def test_every_numeric_field_is_in_the_schema():
     covered = {k[-1] for k in NUMERIC_FIELDS}
     schema = {f.name for f in fields(FlightConfig) if f.type in ("float", "float | None")}
     schema |= {f.name for f in fields(Limits)}
-    assert len(schema) == 11
+    assert len(schema) == 12
     assert schema <= covered, schema - covered
 
 

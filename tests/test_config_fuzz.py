@@ -36,7 +36,8 @@ BASE = {
     "yaw": {"mode": "table", "yaw_deg": 0.0, "table": [[0.0, 0.0], [1.0, 45.0]]},
     "limits": {"max_tilt_deg": 30.0, "min_thrust_m_s2": 2.0, "max_thrust_m_s2": 20.0, "max_approach_speed_m_s": 1.0, "max_tilt_rate_rad_s": 3.0},
     "flight": {"output_mode": "attitude", "setpoint_rate_hz": 50.0, "state_timeout_s": 0.5, "hover_thrust": 0.5,
-               "takeoff_altitude_m": 2.0, "throw_activation_height_m": 2.0, "end_action": "hold", "attitude_time_constant_s": 0.1},
+               "takeoff_altitude_m": 2.0, "throw_activation_height_m": 2.0, "end_action": "hold", "attitude_time_constant_s": 0.1,
+               "velocity_correction_s": 1.0},
     "vehicle": {},
 }  # fmt: skip
 
@@ -64,7 +65,7 @@ PLACES = [("path",), ("path", "waypoints"), ("path", "waypoints", 1), ("path", "
           ("limits",), ("limits", "max_tilt_deg"), ("limits", "min_thrust_m_s2"), ("limits", "max_thrust_m_s2"),
           ("limits", "max_approach_speed_m_s"), ("limits", "max_tilt_rate_rad_s"), ("flight",), ("flight", "output_mode"),
           ("flight", "setpoint_rate_hz"), ("flight", "state_timeout_s"), ("flight", "hover_thrust"), ("flight", "takeoff_altitude_m"),
-          ("flight", "end_action"), ("flight", "attitude_time_constant_s"), ("vehicle",), ("vehicle", "accel_gain_xy"),
+          ("flight", "end_action"), ("flight", "attitude_time_constant_s"), ("flight", "velocity_correction_s"), ("vehicle",), ("vehicle", "accel_gain_xy"),
           ("vehicle", "accel_lag_xy_s"), ("unknown_section",)]  # fmt: skip
 
 

@@ -26,6 +26,17 @@ Plausibility (telemetry can be late, duplicated, corrupt in ways the CRC passes,
   announces a reset itself and is believed.
 - ``StateEstimate.clock_s`` is one continuous clock over the flight (jumps excluded), for
   durations: a clock jump does not make a duration span two clocks.
+
+Velocity consistency (``velocity_correction_s``, off when None): the controller steers the
+*position* estimate onto the path and damps with the *velocity* estimate, so the two must agree. On
+PX4 SIH they do not: EKF2's velocity is 10-40 cm/s RMS off the derivative of its own position
+(biased, drifting over ~10 s) while that derivative is close to the true velocity (ground truth),
+and a velocity bias b leaves the position a lap-periodic ~(k_d / k_p)·|b| off the path. The
+correction adds to the reported velocity a low-pass (time constant ``velocity_correction_s``) of
+(Δposition / Δt − mean velocity) between consecutive samples: the velocity's high-frequency content
+is kept, its low-frequency content becomes the position's. Each sample's residual is bounded by
+VELOCITY_RESIDUAL_MAX_M_S and the correction by VELOCITY_CORRECTION_MAX_M_S; a sample after a gap,
+a reset or a clock re-anchoring does not update it.
 """
 
 from __future__ import annotations
@@ -102,6 +113,14 @@ JUMP_SPEED_SLACK_M_S = 5.0
 
 NEW, OLD, PENDING, REANCHOR = "new", "old", "pending", "reanchor"
 
+# Velocity consistency: one sample's (Δposition / Δt − velocity) beyond this is a GPS step or a
+# reset, not a bias (bounded so that it moves the correction by at most this · Δt / τ); a correction
+# beyond this is a broken estimator, not one the app should fly on (it is held there); samples more
+# than VELOCITY_CORRECTION_GAP_S apart do not update it.
+VELOCITY_RESIDUAL_MAX_M_S = 2.0
+VELOCITY_CORRECTION_MAX_M_S = 1.0
+VELOCITY_CORRECTION_GAP_S = 0.5
+
 
 class _Clock:
     """Sample-time acceptance of one stream (see the module docstring). Pure."""
@@ -147,10 +166,16 @@ class Estimator:
     ``clock_reanchors`` (timelines adopted); ``last_event`` describes the latest of these.
     """
 
-    def __init__(self, source: str = "auto") -> None:
+    def __init__(self, source: str = "auto", velocity_correction_s: float | None = None) -> None:
         if source not in SOURCES:
             raise ValueError(f"state source must be one of {SOURCES}, got {source!r}")
+        if velocity_correction_s is not None and not (math.isfinite(velocity_correction_s) and velocity_correction_s > 0.0):
+            raise ValueError(f"velocity_correction_s must be > 0 s or None, got {velocity_correction_s!r}")
         self._source = source
+        self._vc_tau_s = velocity_correction_s
+        self._vc_bias_ned = np.zeros(3)
+        self._vc_last: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None  # t, pos, raw vel (NED)
+        self._vc_skip = False
         self._q_ned_frd: NDArray[np.float64] | None = None
         self._rates_frd: NDArray[np.float64] | None = None
         self._latest: StateEstimate | None = None
@@ -179,6 +204,30 @@ class Estimator:
     def latest(self) -> StateEstimate | None:
         return self._latest
 
+    @property
+    def velocity_correction_enu_m_s(self) -> NDArray[np.float64]:
+        """The correction added to the reported velocity, world ENU m/s (zeros when off)."""
+        return frames.ned_to_enu(self._vc_bias_ned)
+
+    def _corrected_velocity(self, time_s: float, pos_ned: NDArray[np.float64], vel_ned: NDArray[np.float64], verdict: str) -> NDArray[np.float64]:
+        """The velocity made consistent with the position's derivative (module docstring), NED m/s."""
+        tau = self._vc_tau_s
+        if tau is None:
+            return vel_ned
+        prev, self._vc_last = self._vc_last, (time_s, pos_ned, vel_ned)
+        skip, self._vc_skip = self._vc_skip, False
+        if prev is not None and verdict == NEW and not skip:
+            dt = time_s - prev[0]
+            if 0.0 < dt <= VELOCITY_CORRECTION_GAP_S:
+                residual = (pos_ned - prev[1]) / dt - 0.5 * (vel_ned + prev[2])
+                residual = np.clip(residual, -VELOCITY_RESIDUAL_MAX_M_S, VELOCITY_RESIDUAL_MAX_M_S)
+                bias = self._vc_bias_ned + (1.0 - math.exp(-dt / tau)) * (residual - self._vc_bias_ned)
+                norm = float(np.linalg.norm(bias))
+                if norm > VELOCITY_CORRECTION_MAX_M_S:
+                    bias = bias * (VELOCITY_CORRECTION_MAX_M_S / norm)
+                self._vc_bias_ned = bias
+        return vel_ned + self._vc_bias_ned
+
     def on_message(self, msg: Any) -> bool:
         kind = msg.get_type()
         if kind == "ATTITUDE_QUATERNION":
@@ -191,6 +240,7 @@ class Estimator:
         return False
 
     def _reset(self, reason: str) -> None:
+        self._vc_skip = True  # the position jumped: this sample's Δposition is not a velocity
         self.reset_pending = True
         self.reset_reason = reason
         self.last_event = reason
@@ -258,6 +308,7 @@ class Estimator:
         if last is not None and verdict == NEW:
             self._clock_s += time_s - last.time_s  # a confirmed jump (REANCHOR) adds no time
         self._pos_clock.commit(time_s, verdict)
+        vel_ned = self._corrected_velocity(time_s, pos_ned, vel_ned, verdict)
         q = None if self._q_ned_frd is None else frames.quat_ned_frd_to_enu_flu(self._q_ned_frd)
         rates = None if self._rates_frd is None else frames.frd_to_flu(self._rates_frd)
         self._latest = StateEstimate(

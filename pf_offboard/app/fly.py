@@ -77,6 +77,7 @@ class FlightSettings:
     hover_thrust: float | None
     end_action: str
     attitude_time_constant_s: float
+    velocity_correction_s: float | None = None  # pf_offboard.app.estimator; None: off
 
 
 def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
@@ -94,6 +95,7 @@ def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
         hover_thrust=get("hover_thrust", None),
         end_action=args.end_action or get("end_action", "hold"),
         attitude_time_constant_s=_attitude_time_constant(config, get("attitude_time_constant_s", None)),
+        velocity_correction_s=get("velocity_correction_s", None),
     )
     if s.output_mode not in ("acceleration", "attitude", "rates"):
         raise InputError("flight.output_mode", f"must be acceleration, attitude or rates, got {s.output_mode!r}")
@@ -332,7 +334,7 @@ async def _fly(
             time_constant_s=settings.attitude_time_constant_s,
             max_body_rate_rad_s=_rate_bound(config),
         )  # fmt: skip
-        pipeline = Pipeline(follower, encoder, Estimator(args.state_source))
+        pipeline = Pipeline(follower, encoder, Estimator(args.state_source, settings.velocity_correction_s))
         safety = getattr(config, "safety", None) or SafetyConfig()
         monitor = EnvelopeMonitor(safety, fence if fence is not None else envelope_fence(config), path.length_m, path.closed)
         bridge = Bridge(

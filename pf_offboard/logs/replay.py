@@ -267,7 +267,7 @@ def build_pipeline(
     if follower is None:
         follower = controller_from_config(config)
     source = options.state_source or _state_source_of(entries)
-    return Pipeline(follower, encoder, Estimator(source)), profile, output_mode, target_system
+    return Pipeline(follower, encoder, Estimator(source, settings.velocity_correction_s)), profile, output_mode, target_system
 
 
 def replay_flight(

@@ -340,7 +340,7 @@ class SimFlight:
             hover_thrust=settings.hover_thrust if settings.hover_thrust is not None else 0.5,
             time_constant_s=settings.attitude_time_constant_s,
         )  # fmt: skip
-        self.pipeline = Pipeline(follower, encoder, Estimator("local_position"))
+        self.pipeline = Pipeline(follower, encoder, Estimator("local_position", settings.velocity_correction_s))
         self.laps = LapCounter(self.path.length_m, self.path.closed)
         self.end = EndSpec(laps=spec.laps, duration_s=None)
         height = spec.throw_height_m or config.flight.throw_activation_height_m or 2.0

@@ -13,6 +13,12 @@ error — what the truth would have to be corrected by to give the report — as
 - **fusion steps**: the error is updated only at the GPS fusion rate ``fusion_rate_hz`` and held
   in between, plus white noise drawn at every fusion (``position_white_std_*``,
   ``velocity_white_std_*``).
+- a **velocity bias** (``velocity_bias_std_*``, first-order Gauss–Markov with time constant
+  ``velocity_bias_time_constant_s``) on the reported velocity only, *not* integrated into the
+  position: the reported velocity then disagrees with the reported position's derivative, as
+  EKF2's does on PX4 SIH (measured against ground truth: velocity 10–40 cm/s RMS off its own
+  position's derivative, drifting over ~10 s, while that derivative follows the true velocity).
+  Drawn from a generator spawned from the one given, so the other draws do not change with it.
 
 Units: metres, m/s, seconds, Hz. Deterministic for a numpy Generator (one draw per axis per
 fusion, whatever the caller's step). Cost: a few µs per fusion (10 Hz), nothing per physics tick.
@@ -39,6 +45,9 @@ class EstimatorNoise:
     position_white_std_z_m: float = 0.0
     velocity_white_std_xy_m_s: float = 0.0
     velocity_white_std_z_m_s: float = 0.0
+    velocity_bias_std_xy_m_s: float = 0.0
+    velocity_bias_std_z_m_s: float = 0.0
+    velocity_bias_time_constant_s: float = 8.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -47,7 +56,7 @@ class EstimatorNoise:
                 raise ValueError(f"EstimatorNoise.{f.name}: must be finite and >= 0, got {value!r}")
         if self.fusion_rate_hz > 1000.0:
             raise ValueError(f"EstimatorNoise.fusion_rate_hz: must be <= 1000 (physics rate), got {self.fusion_rate_hz!r}")
-        for name in ("wander_velocity_time_constant_s", "wander_position_time_constant_s"):
+        for name in ("wander_velocity_time_constant_s", "wander_position_time_constant_s", "velocity_bias_time_constant_s"):
             if getattr(self, name) <= 0.0:
                 raise ValueError(f"EstimatorNoise.{name}: must be > 0, got {getattr(self, name)!r}")
 
@@ -87,6 +96,13 @@ class EstimatorError:
         self._drive = (noise.wander_velocity_std_xy_m_s * kv,) * 2 + (noise.wander_velocity_std_z_m_s * kv,)
         self._white_p = (noise.position_white_std_xy_m,) * 2 + (noise.position_white_std_z_m,)
         self._white_v = (noise.velocity_white_std_xy_m_s,) * 2 + (noise.velocity_white_std_z_m_s,)
+        self._phi_b = math.exp(-dt / noise.velocity_bias_time_constant_s)
+        kb = math.sqrt(max(0.0, 1.0 - self._phi_b * self._phi_b))
+        self._drive_b = (noise.velocity_bias_std_xy_m_s * kb,) * 2 + (noise.velocity_bias_std_z_m_s * kb,)
+        self._bias_on = noise.velocity_bias_std_xy_m_s > 0.0 or noise.velocity_bias_std_z_m_s > 0.0
+        # its own stream (spawned only when used): the wander and white draws stay as they were
+        self._rng_b = rng.spawn(1)[0] if self._bias_on else None
+        self._vb = [0.0, 0.0, 0.0]  # velocity bias (reported velocity only)
         self._wv = [0.0, 0.0, 0.0]  # wander velocity error
         self._wp = [0.0, 0.0, 0.0]  # wander position error
         self.position_error_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -111,9 +127,16 @@ class EstimatorError:
             for i in range(3):
                 wp[i] = leak * wp[i] + gp * wv[i]
                 wv[i] = phi * wv[i] + drive[i] * row[i]
+        vb = self._vb
+        if self._rng_b is not None:
+            phib, drive_b = self._phi_b, self._drive_b
+            for zb in self._rng_b.standard_normal((n, 3)).tolist():
+                for i in range(3):
+                    vb[i] = phib * vb[i] + drive_b[i] * zb[i]
         wpn, wvn = self._white_p, self._white_v
         self.position_error_ned_m = (wp[0] + wpn[0] * row[3], wp[1] + wpn[1] * row[4], wp[2] + wpn[2] * row[5])
-        self.velocity_error_ned_m_s = (wv[0] + wvn[0] * row[6], wv[1] + wvn[1] * row[7], wv[2] + wvn[2] * row[8])
+        self.velocity_error_ned_m_s = (wv[0] + wvn[0] * row[6] + vb[0], wv[1] + wvn[1] * row[7] + vb[1],
+                                       wv[2] + wvn[2] * row[8] + vb[2])  # fmt: skip
         return True
 
 

@@ -186,3 +186,64 @@ def test_a_gap_in_the_stream_is_confirmed_without_a_reset() -> None:
     assert not est.on_message(local_position(3036, (1.0, 2.0, -3.0), (0, 0, 0)))
     assert est.on_message(local_position(3040, (1.0, 2.0, -3.0), (0, 0, 0)))
     assert est.clock_reanchors == 1 and not est.reset_pending and "resumed 2.004 s later" in est.last_event
+
+
+# ------------------------------------------------------------------------- velocity consistency
+def _circle_flight(est: Estimator, bias_ned, seconds: float = 8.0, rate_hz: float = 100.0, t0_ms: int = 1000,
+                   rng: np.random.Generator | None = None) -> list[tuple[np.ndarray, np.ndarray]]:  # fmt: skip
+    """A vehicle on a 2 m circle at 1.5 m/s; the autopilot reports the true position (plus optional
+    5 mm noise) and the true velocity plus ``bias_ned``. Returns (true velocity ENU, used velocity ENU)."""
+    out = []
+    w = 1.5 / 2.0
+    for i in range(int(seconds * rate_hz)):
+        t = i / rate_hz
+        p = np.array([2.0 * math.cos(w * t), 2.0 * math.sin(w * t), -2.0])
+        v = np.array([-1.5 * math.sin(w * t), 1.5 * math.cos(w * t), 0.0])
+        if rng is not None:
+            p = p + rng.normal(0.0, 0.005, 3)
+        assert est.on_message(local_position(t0_ms + round(1000 * t), tuple(p), tuple(v + np.asarray(bias_ned))))
+        out.append((frames.ned_to_enu(v), est.latest.velocity_enu_m_s.copy()))
+    return out
+
+
+def test_velocity_correction_removes_a_velocity_bias_the_position_does_not_show() -> None:
+    """EKF2 on PX4 SIH reports a velocity 10-40 cm/s off its own position's derivative; with the
+    correction (1 s) the velocity the controller sees is back within 1 cm/s of the true one
+    after 5 time constants, along a circle (the bias rotates in the path frame); off, the bias stays."""
+    bias = (0.3, -0.2, 0.1)
+    on, off = Estimator("local_position", velocity_correction_s=1.0), Estimator("local_position")
+    flown_on, flown_off = _circle_flight(on, bias), _circle_flight(off, bias)
+    late = [np.linalg.norm(used - true) for true, used in flown_on[600:]]
+    assert max(late) < 0.01
+    assert on.velocity_correction_enu_m_s == pytest.approx(-frames.ned_to_enu(np.array(bias)), abs=0.01)
+    assert np.linalg.norm(flown_off[-1][1] - flown_off[-1][0]) == pytest.approx(np.linalg.norm(bias), abs=1e-9)
+    assert not off.velocity_correction_enu_m_s.any()
+
+
+def test_velocity_correction_keeps_an_unbiased_velocity_and_bounds_noise() -> None:
+    """No bias, 5 mm white position noise at 100 Hz (more than EKF2 shows): the correction stays small (< 5 cm/s) and averages
+    out (its mean < 1 cm/s)."""
+    est = Estimator("local_position", velocity_correction_s=1.0)
+    flown = _circle_flight(est, (0.0, 0.0, 0.0), seconds=20.0, rng=np.random.default_rng(3))
+    err = np.array([used - true for true, used in flown[200:]])
+    assert np.abs(err).max() < 0.05 and np.abs(err.mean(axis=0)).max() < 0.01
+
+
+def test_velocity_correction_ignores_a_confirmed_position_jump() -> None:
+    """An estimator reset (a confirmed 50 m jump) is not a velocity: the correction is unchanged
+    by it, and a single wild sample moves it by at most the residual bound · dt / tau."""
+    est = Estimator("local_position", velocity_correction_s=1.0)
+    for k in range(10):
+        assert est.on_message(local_position(1000 + 10 * k, (0.0, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    assert not est.on_message(local_position(1100, (50.0, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    assert est.on_message(local_position(1110, (50.0, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    assert est.reset_pending and not est.velocity_correction_enu_m_s.any()
+    # a 1 m step within the plausibility margin: bounded to 2 m/s residual · 0.01 s / 1 s
+    assert est.on_message(local_position(1120, (50.9, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    assert np.linalg.norm(est.velocity_correction_enu_m_s) <= 2.0 * (1.0 - math.exp(-0.01)) + 1e-12
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, math.nan, math.inf])
+def test_velocity_correction_time_constant_is_validated(bad: float) -> None:
+    with pytest.raises(ValueError, match="velocity_correction_s"):
+        Estimator("local_position", velocity_correction_s=bad)

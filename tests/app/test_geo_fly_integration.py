@@ -28,9 +28,9 @@ EXPECTED_ENU_M = np.loadtxt(DATA / "expected_local_enu_m.txt")  # the paper path
 HOVER_NED = (0.0, 5.0, -2.0)  # ENU (5, 0, 2): 1.5 m south of the path's first way-point (5, 1.5, 2)
 
 
-def geo_config(tmp: Path, sample: str = "mission.plan") -> Path:
+def geo_config(tmp: Path, sample: str = "mission.plan", safety: dict | None = None) -> Path:
     shutil.copy(DATA / sample, tmp / sample)
-    data = {
+    data: dict = {
         "path": {"file": sample, "altitude_reference": "relative_home", "closed": True},
         "speed_m_s": -1.5,
         "gains": {"transversal": {"bandwidth_hz": 6.0, "damping": 0.7}, "tangential": {"bandwidth_hz": 4.0, "damping": 0.8}},
@@ -39,6 +39,8 @@ def geo_config(tmp: Path, sample: str = "mission.plan") -> Path:
         "compensation": {"enabled": False},
         "flight": {"setpoint_rate_hz": RATE_HZ},
     }
+    if safety is not None:
+        data["safety"] = safety
     p = tmp / "geo.yaml"
     p.write_text(yaml.safe_dump(data))
     return p
@@ -109,3 +111,24 @@ def test_plan_for_another_field_is_refused_before_any_setpoint(tmp_path, capsys)
     assert out <= {"HEARTBEAT", "COMMAND_LONG"}
     sent = [e.message for e in read_tlog(tmp_path / "log" / "flight.tlog") if e.direction == "out" and e.message.get_type() == "COMMAND_LONG"]
     assert all(c.command == 512 for c in sent)
+
+
+def test_geodetic_path_outside_the_fence_is_refused_before_any_setpoint(tmp_path, capsys) -> None:
+    """The plan is at the vehicle's field but the safety: fence (a box 3 m east at most) leaves
+    out its eastern way-points: once the origin is known the converted path is checked against the
+    fence, and the flight is refused (exit 2, one line naming safety:) with nothing but the
+    origin requests sent."""
+    from pf_offboard.cli import main
+
+    config = geo_config(tmp_path, safety={"fence_min_enu_m": [-20, -20, 0], "fence_max_enu_m": [3, 20, 10]})
+    with spawn(mock(HOME)) as m:
+        code = main(["fly", "--connect", f"udpout:127.0.0.1:{m.ports.udp}", "--config", str(config), "--log-dir",
+                     str(tmp_path / "log"), "--airborne", "--heartbeat-timeout", "5", "--quiet"])  # fmt: skip
+    err = capsys.readouterr().err
+    print("\n" + err.strip())
+    assert code == 2, err
+    errors = [line for line in err.splitlines() if "error:" in line]  # (the converted path's note line comes first)
+    assert len(errors) == 1 and errors[0].startswith("pf-offboard fly: error: safety: the path leaves the fence")
+    out = [e.message for e in read_tlog(tmp_path / "log" / "flight.tlog") if e.direction == "out"]
+    assert {m.get_type() for m in out} <= {"HEARTBEAT", "COMMAND_LONG"}
+    assert all(m.command == 512 for m in out if m.get_type() == "COMMAND_LONG")  # REQUEST_MESSAGE only

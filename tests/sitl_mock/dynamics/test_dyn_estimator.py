@@ -61,6 +61,25 @@ def test_error_does_not_depend_on_the_callers_step() -> None:
     assert a.velocity_error_ned_m_s == b.velocity_error_ned_m_s
 
 
+def test_velocity_bias_is_not_in_the_position_and_leaves_the_other_draws_alone() -> None:
+    """px4-sih's velocity bias (EKF2 on SIH: velocity 10-40 cm/s off its position's derivative):
+    the reported velocity minus the wander that moves the position has the configured std
+    (xy 0.15, z 0.10 m/s, within the sampling error of 20 time constants); the position error is the
+    same draw for draw as without the bias (its own generator)."""
+    noise = preset("px4-sih").estimator
+    assert noise.velocity_bias_std_xy_m_s == 0.15 and noise.velocity_bias_std_z_m_s == 0.10
+    plain = EstimatorNoise(**{**noise.__dict__, "velocity_bias_std_xy_m_s": 0.0, "velocity_bias_std_z_m_s": 0.0})
+    biased, unbiased = EstimatorError(noise, np.random.default_rng(5)), EstimatorError(plain, np.random.default_rng(5))
+    bias = []
+    for k in range(1, 1601):  # 160 s at the 10 Hz fusion rate: 20 time constants
+        biased.advance_to(k * 0.1)
+        unbiased.advance_to(k * 0.1)
+        assert biased.position_error_ned_m == unbiased.position_error_ned_m
+        bias.append(np.subtract(biased.velocity_error_ned_m_s, unbiased.velocity_error_ned_m_s))
+    std = np.sqrt(np.mean(np.square(bias), axis=0))
+    assert std[:2] == pytest.approx([0.15, 0.15], rel=0.5) and std[2] == pytest.approx(0.10, rel=0.5)
+
+
 def test_measure_reports_the_estimate_and_the_truth_is_untouched() -> None:
     params = preset("px4-sih")
     truth_only = Simulator(params.with_(estimator=EstimatorNoise()), np.random.default_rng(1), Spawn.hover((0, 0, -2)))

@@ -13,7 +13,7 @@ from sitl_mock.dynamics.identify import accel_step_rise_time_s, attitude_bandwid
 
 # docs/sitl-mock-dynamics.md, "Measured inner loops" (latency off, exact hover thrust).
 DOCUMENTED = {
-    "px4-sih": {"horizontal": 0.183, "vertical": 0.054, "bandwidth_hz": 2.35},
+    "px4-sih": {"horizontal": 0.182, "vertical": 0.054, "bandwidth_hz": 1.18},
     "arducopter": {"horizontal": 0.226, "vertical": 0.020, "bandwidth_hz": 0.99},
 }
 
