@@ -77,7 +77,7 @@ class FlightSettings:
     hover_thrust: float | None
     end_action: str
     attitude_time_constant_s: float
-    velocity_correction_s: float | None = None  # pf_offboard.app.estimator; None: off
+    velocity_correction_s: float | None  # pf_offboard.app.estimator; None: off
 
 
 def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:

@@ -99,9 +99,9 @@ class EstimatorError:
         self._phi_b = math.exp(-dt / noise.velocity_bias_time_constant_s)
         kb = math.sqrt(max(0.0, 1.0 - self._phi_b * self._phi_b))
         self._drive_b = (noise.velocity_bias_std_xy_m_s * kb,) * 2 + (noise.velocity_bias_std_z_m_s * kb,)
-        self._bias_on = noise.velocity_bias_std_xy_m_s > 0.0 or noise.velocity_bias_std_z_m_s > 0.0
         # its own stream (spawned only when used): the wander and white draws stay as they were
-        self._rng_b = rng.spawn(1)[0] if self._bias_on else None
+        bias_on = noise.velocity_bias_std_xy_m_s > 0.0 or noise.velocity_bias_std_z_m_s > 0.0
+        self._rng_b = rng.spawn(1)[0] if bias_on else None
         self._vb = [0.0, 0.0, 0.0]  # velocity bias (reported velocity only)
         self._wv = [0.0, 0.0, 0.0]  # wander velocity error
         self._wp = [0.0, 0.0, 0.0]  # wander position error

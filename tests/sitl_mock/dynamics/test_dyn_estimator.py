@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -68,7 +70,7 @@ def test_velocity_bias_is_not_in_the_position_and_leaves_the_other_draws_alone()
     same draw for draw as without the bias (its own generator)."""
     noise = preset("px4-sih").estimator
     assert noise.velocity_bias_std_xy_m_s == 0.15 and noise.velocity_bias_std_z_m_s == 0.10
-    plain = EstimatorNoise(**{**noise.__dict__, "velocity_bias_std_xy_m_s": 0.0, "velocity_bias_std_z_m_s": 0.0})
+    plain = dataclasses.replace(noise, velocity_bias_std_xy_m_s=0.0, velocity_bias_std_z_m_s=0.0)
     biased, unbiased = EstimatorError(noise, np.random.default_rng(5)), EstimatorError(plain, np.random.default_rng(5))
     bias = []
     for k in range(1, 1601):  # 160 s at the 10 Hz fusion rate: 20 time constants
