@@ -5,6 +5,7 @@ Used by ``tests/sitl_mock`` and usable by the app's tests. Loopback only.
 
 from __future__ import annotations
 
+import itertools
 import os
 import socket
 import time
@@ -17,15 +18,16 @@ from pymavlink.dialects.v20 import common as mavlink
 # mock's own, in the same test), and the client listening on it then fails with "Address already in
 # use" (seen in CI). Below the range only an explicit bind can take it.
 _PORT_LOW, _PORT_HIGH = 20000, 32000
-_next_port = [_PORT_LOW + (os.getpid() * 7919) % (_PORT_HIGH - _PORT_LOW)]
+# One walk over the range per process, starting at a pid-dependent port (parallel test processes
+# start apart) and wrapping around.
+_start = _PORT_LOW + (os.getpid() * 7919) % (_PORT_HIGH - _PORT_LOW)
+_ports = itertools.cycle(itertools.chain(range(_start, _PORT_HIGH), range(_PORT_LOW, _start)))
 
 
 def free_udp_port() -> int:
     """A UDP port on 127.0.0.1 that is free now and outside the ephemeral range (for a client to
     listen on). Successive calls in one process walk the range, so two never return the same port."""
-    for _ in range(_PORT_HIGH - _PORT_LOW):
-        port = _next_port[0]
-        _next_port[0] = _PORT_LOW + (port + 1 - _PORT_LOW) % (_PORT_HIGH - _PORT_LOW)
+    for port in itertools.islice(_ports, _PORT_HIGH - _PORT_LOW):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             try:
                 s.bind(("127.0.0.1", port))
