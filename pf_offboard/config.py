@@ -107,6 +107,7 @@ class CompensationConfig:
     observer_rad_s: float = 8.0  # disturbance-observer poles (rad/s)
     integral_rad_s: float = 1.0  # integral action on speed and transversal offsets (rad/s)
     phase_margin_deg: float = 30.0  # for gains: auto (pf_offboard.control.tuning)
+    tangential_phase_margin_deg: float = 40.0  # the speed loop's, for gains: auto
 
 
 @dataclass(frozen=True)
@@ -458,13 +459,16 @@ def _flight(data: Any) -> FlightConfig:
 
 
 def _compensation(data: Any) -> CompensationConfig:
-    d = _section(data, "compensation", ("enabled", "observer_rad_s", "integral_rad_s", "phase_margin_deg"))
+    d = _section(data, "compensation", ("enabled", "observer_rad_s", "integral_rad_s", "phase_margin_deg", "tangential_phase_margin_deg"))
     c = CompensationConfig()
     return CompensationConfig(
         enabled=_bool(d, "enabled", "compensation.enabled", c.enabled),
         observer_rad_s=_number(d, "observer_rad_s", "compensation.observer_rad_s", c.observer_rad_s, 0.0, 50.0),  # type: ignore[arg-type]
         integral_rad_s=_number(d, "integral_rad_s", "compensation.integral_rad_s", c.integral_rad_s, 0.0, 10.0),  # type: ignore[arg-type]
         phase_margin_deg=_number(d, "phase_margin_deg", "compensation.phase_margin_deg", c.phase_margin_deg, 10.0, 80.0),  # type: ignore[arg-type]
+        tangential_phase_margin_deg=_number(  # type: ignore[arg-type]
+            d, "tangential_phase_margin_deg", "compensation.tangential_phase_margin_deg", c.tangential_phase_margin_deg, 10.0, 80.0,
+        ),
     )
 
 
@@ -592,7 +596,7 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
     if gains_auto:
         from pf_offboard.control.tuning import gains_for_vehicle
 
-        gains = gains_for_vehicle(vehicle, compensation.phase_margin_deg)
+        gains = gains_for_vehicle(vehicle, compensation.phase_margin_deg, compensation.tangential_phase_margin_deg)
     elif isinstance(raw_gains, str):
         raise ConfigError("gains", f"must be 'auto' or a mapping (transversal, tangential), got {raw_gains!r}")
     else:

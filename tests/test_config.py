@@ -47,7 +47,11 @@ def test_defaults_for_everything_but_the_path():
     assert cfg.speed_m_s == 1.0
     # no gains section: derived from the (typical) vehicle model, far below the paper's ideal ones
     assert cfg.gains_auto and cfg.vehicle == VehicleModel.typical()
-    assert cfg.gains == gains_for_vehicle(VehicleModel.typical(), cfg.compensation.phase_margin_deg)
+    assert cfg.gains == gains_for_vehicle(
+        VehicleModel.typical(), cfg.compensation.phase_margin_deg, cfg.compensation.tangential_phase_margin_deg
+    )
+    # the speed loop has its own margin (40°) and is not capped at the transversal bandwidth
+    assert cfg.gains.tangential_bandwidth_hz > cfg.gains.transversal_bandwidth_hz
     assert 0.3 < cfg.gains.transversal_bandwidth_hz < Gains().transversal_bandwidth_hz / 3
     assert cfg.compensation.enabled
     assert cfg.limits == Limits()
@@ -119,6 +123,8 @@ BAD = [
     (minimal(yaw={"mode": "table"}), "yaw.table", "at least 2"),
     (minimal(yaw={"mode": "table", "table": [[0.0, 0.0], [0.0, 10.0]]}), "yaw.table[1]", "increasing"),
     (minimal(yaw={"mode": "table", "table": [[0.0, 0.0], [1.0]]}), "yaw.table[1]", "2 numbers"),
+    (minimal(compensation={"tangential_phase_margin_deg": 5.0}), "compensation.tangential_phase_margin_deg", ">= 10"),
+    (minimal(compensation={"tangential_phase_margin_deg": float("nan")}), "compensation.tangential_phase_margin_deg", "finite"),
     (minimal(flight={"output_mode": "thrust"}), "flight.output_mode", "one of"),
     (minimal(flight={"setpoint_rate_hz": 10}), "flight.setpoint_rate_hz", ">= 20"),
     (minimal(flight={"hover_thrust": 1.2}), "flight.hover_thrust", "<= 0.95"),

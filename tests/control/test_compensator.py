@@ -223,6 +223,27 @@ def test_gains_from_model_keep_the_margin() -> None:
     assert gains_for_vehicle(slow, 45.0).transversal_bandwidth_hz < g_slow.transversal_bandwidth_hz
 
 
+def test_speed_loop_keeps_its_own_margin_uncapped_by_the_transversal_one() -> None:
+    """The tangential P gets ``tangential_phase_margin_deg`` on 1 / (s (lag s + 1)), whatever the
+    transversal loops get: a real EKF's velocity error is mostly low-frequency, where a faster speed
+    loop rejects it (docs/controller.md)."""
+    slow = VehicleModel(accel_lag_xy_s=0.2, accel_delay_s=0.1)
+    for margin in (30.0, 40.0, 60.0):
+        g = gains_for_vehicle(slow, 30.0, margin)
+        kd = 2.0 * g.tangential_damping * 2.0 * math.pi * g.tangential_bandwidth_hz
+
+        def loop(om: float, kd: float = kd) -> complex:
+            s = 1j * om
+            return kd / (s * (slow.accel_lag_xy_s * s + 1))
+
+        assert phase_margin_deg(loop) == pytest.approx(margin, abs=0.5)
+        assert g.transversal_bandwidth_hz == gains_for_vehicle(slow, 30.0).transversal_bandwidth_hz
+    assert gains_for_vehicle(slow, 30.0, 40.0).tangential_bandwidth_hz > gains_for_vehicle(slow, 30.0).transversal_bandwidth_hz
+    assert gains_for_vehicle(slow, 30.0, 60.0).tangential_bandwidth_hz < gains_for_vehicle(slow, 30.0, 40.0).tangential_bandwidth_hz
+    with pytest.raises(InputError, match="tangential_phase_margin_deg"):
+        gains_for_vehicle(slow, 30.0, 90.0)
+
+
 def test_reported_speed_stays_finite_far_from_the_path(paper_path) -> None:
     """Outside the tube the exact eta2 at the measured state is singular (1 - kappa xi1 -> 0 at the
     centre of curvature): the reported state uses the speed along the tangent there (a thrown
@@ -244,3 +265,4 @@ def test_reported_speed_stays_finite_far_from_the_path(paper_path) -> None:
         worst = max(worst, abs(cmd.state.eta2))
     # inside the tube the exact eta2 = v_t / (1 - kappa xi1) is at most 10 |v| (tube bound 0.9)
     assert worst <= 10.0 * 1.5
+
