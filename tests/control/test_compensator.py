@@ -265,4 +265,3 @@ def test_reported_speed_stays_finite_far_from_the_path(paper_path) -> None:
         worst = max(worst, abs(cmd.state.eta2))
     # inside the tube the exact eta2 = v_t / (1 - kappa xi1) is at most 10 |v| (tube bound 0.9)
     assert worst <= 10.0 * 1.5
-

@@ -178,16 +178,16 @@ def test_error_spectrum_matches_ekf2_on_px4_sih() -> None:
     0.3-0.5x of the position's motion at 0.1-0.7 Hz)."""
     noise = preset("px4-sih").estimator
     rate_hz, window_s = 50.0, 15.0
+    t = np.arange(1, int(45.0 * rate_hz) + 1) / rate_hz  # the last 15 s of 45 (stationary)
+    n = int(window_s * rate_hz)
     vel, dpos = [], []
     for seed in range(24):
         err = EstimatorError(noise, np.random.default_rng(seed))
-        t = np.arange(1, int(45.0 * rate_hz) + 1) / rate_hz  # the last 15 s of 45 (stationary)
         p, v = [], []
         for ti in t:
             err.advance_to(float(ti))
             p.append(err.position_error_ned_m[:2])
             v.append(err.velocity_error_ned_m_s[:2])
-        n = int(window_s * rate_hz)
         p, v = np.array(p)[-n:], np.array(v)[-n:]
         for axis in range(2):
             vel.append(_band_rms(v[:, axis], rate_hz) ** 2)
