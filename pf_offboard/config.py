@@ -607,6 +607,11 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
         length = _build_path(path.waypoints_enu_m, path.closed, path.moving_frame).length_m
         if table[-1][0] >= table[0][0] + length:
             raise ConfigError("speed_profile.table", f"eta1 values must span less than one lap ({length:.3f} m) on a closed path")
+    feedforward = _choice(d, "feedforward", "feedforward", "on_path", FEEDFORWARD_MODES)
+    if feedforward == "any_state" and compensation.enabled:
+        from pf_offboard.control.follower import ANY_STATE_NEEDS_NO_COMPENSATION
+
+        raise ConfigError("feedforward", ANY_STATE_NEEDS_NO_COMPENSATION)
     return Config(
         path=path,
         speed_m_s=speed,
@@ -621,7 +626,7 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
         source=source,
         controller=_choice(d, "controller", "controller", "path_following", CONTROLLERS),
         speed_profile=profile,
-        feedforward=_choice(d, "feedforward", "feedforward", "on_path", FEEDFORWARD_MODES),
+        feedforward=feedforward,
     )
 
 

@@ -1,11 +1,17 @@
 #!/usr/bin/env python3
-"""Any-state vs on-path body-rate feed-forward on thrown starts (a benchmark, not a test).
+"""Body-rate feed-forward variants on thrown starts (a benchmark, not a test).
 
 ``sim`` flights (in process, the mock autopilot) with the realistic presets ``px4-sih`` (PX4
 profile) and ``arducopter`` (ArduPilot profile), the paper path at +1.5 m/s with the typical vehicle
-model (no gains / vehicle / compensation sections: auto gains, compensation on; configs/px4-sih.yaml
-is identified for acceleration setpoints, not attitude), in attitude and rates output, thrown from
-three states. For each run,
+model (no gains / vehicle sections: auto gains; configs/px4-sih.yaml is identified for acceleration
+setpoints, not attitude), in attitude and rates output, thrown from three states, with:
+
+- ``lead``: the inner-loop compensation on (the default), whose lag lead replaces the roll/pitch
+  body-rate feed-forward (the command carries the yaw rate only);
+- ``on_path`` / ``any_state``: compensation off, the paper's feed-forward or the any-state one
+  (which needs compensation off).
+
+For each run,
 over the first CONVERGENCE_S after activation: RMS attitude (tilt) tracking error (angle between the
 commanded and the vehicle's body z, i.e. thrust direction, the vehicle's from the .tlog's
 ATTITUDE_QUATERNION; the heading is left out: it converges on its own, slower) and RMS cross-track
@@ -35,12 +41,16 @@ CONVERGENCE_S = 3.0
 THROWS = ((1.0, -2.0, 1.2, 0.5, 1.0, 5.0), (-1.0, -1.0, 1.0, 2.0, -1.0, 5.5), (0.5, 0.5, 1.2, -1.5, 1.5, 5.0))
 
 
-def _config(dst: Path, base: str, feedforward: str, typical: bool) -> Path:
+def _config(dst: Path, base: str, variant: str, typical: bool) -> Path:
     raw = yaml.safe_load((ROOT / "configs" / base).read_text())
     if typical:  # no gains / vehicle / compensation sections: auto gains from the typical model
         for key in ("gains", "vehicle", "compensation"):
             raw.pop(key, None)
-    raw["feedforward"] = feedforward
+    if variant == "lead":
+        raw["feedforward"] = "on_path"
+    else:
+        raw["feedforward"] = variant
+        raw["compensation"] = {"enabled": False}
     raw["speed_m_s"] = 1.5
     dst.write_text(yaml.safe_dump(raw, sort_keys=False))
     return dst
@@ -86,7 +96,7 @@ def main() -> None:
         out = Path(tmp)
         for vehicle, autopilot, base, typical in cases:
             for output in ("attitude", "rates"):
-                for ff in ("on_path", "any_state"):
+                for ff in ("lead", "on_path", "any_state"):
                     cfg = _config(out / f"{vehicle}-{ff}.yaml", base, ff, typical)
                     runs = [_run(cfg, vehicle, autopilot, output, th, out) for th in THROWS]
                     att = [r[0] for r in runs]

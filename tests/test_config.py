@@ -125,6 +125,8 @@ BAD = [
     (minimal(yaw={"mode": "table", "table": [[0.0, 0.0], [1.0]]}), "yaw.table[1]", "2 numbers"),
     (minimal(compensation={"tangential_phase_margin_deg": 5.0}), "compensation.tangential_phase_margin_deg", ">= 10"),
     (minimal(compensation={"tangential_phase_margin_deg": float("nan")}), "compensation.tangential_phase_margin_deg", "finite"),
+    (minimal(feedforward="any_state"), "feedforward", "compensation.enabled: false"),
+    (minimal(feedforward="any_state", compensation={"enabled": True}), "feedforward", "lag lead replaces"),
     (minimal(flight={"output_mode": "thrust"}), "flight.output_mode", "one of"),
     (minimal(flight={"setpoint_rate_hz": 10}), "flight.setpoint_rate_hz", ">= 20"),
     (minimal(flight={"hover_thrust": 1.2}), "flight.hover_thrust", "<= 0.95"),

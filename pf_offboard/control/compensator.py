@@ -18,7 +18,9 @@ Per control step, world frame ENU (m, m/s, m/s²):
 2. **Predictor** (Smith): integrates the model (lag filter included) over the setpoints already
    sent to the state at ``t + delay`` — when the next setpoint starts to act. The control law runs
    on it; the lag stays part of the plant (the follower leads it with the on-path jerk).
-3. **Inversion**: the law's acceleration ``a`` becomes ``a_sp = (a + drag ⊙ v̂ − d̂) / gain``.
+3. **Inversion**: the law's acceleration ``a`` becomes ``a_sp = (a + drag ⊙ v̂ − d̂) / gain``,
+   after the lag is led along the path (:meth:`InnerLoopCompensator.lead`, which replaces the
+   roll/pitch body-rate feed-forward).
 
 With ``d̂ = d`` the loop is the nominal one, so the path stays invariant; the observer adds no
 explicit time dependence (its state is driven by the measurements only). ``reset()`` forgets
@@ -197,6 +199,17 @@ class InnerLoopCompensator:
         a_f, v, p = list(self._a_f), list(velocity), list(position)
         self._advance(a_f, v, p, time_s, time_s + self.delay_s, time_s + self.delay_z_s)
         return (p[0], p[1], p[2]), (v[0], v[1], v[2])
+
+    def lead(self, accel: Vec, jerk: Vec) -> Vec:
+        """``accel + lag ⊙ jerk`` (ENU, m/s²): the acceleration to ask for so that the modelled
+        first-order lag flies ``accel`` along a motion with this ``jerk`` (m/s³, the on-path one).
+
+        This lead *replaces* the roll/pitch body-rate feed-forward ω_ff: the autopilot's attitude
+        loop (or the app's own in ``rates`` output) tracks the led setpoint, so sending ω_ff as
+        well would lead the path twice. With the compensator the command's body rates carry the
+        yaw-rate feed-forward only (measured: docs/controller.md, *One lead, not two*)."""
+        lag = self.lag
+        return (accel[0] + lag[0] * jerk[0], accel[1] + lag[1] * jerk[1], accel[2] + lag[2] * jerk[2])
 
     def invert(self, time_s: float, accel: Vec, velocity_pred: Vec) -> Vec:
         """Setpoint that makes the modelled vehicle accelerate at ``accel`` (ENU, gravity excluded)

@@ -63,6 +63,10 @@ ANY_STATE_STEP_S = 5e-5
 FINE_BISECTION_STEPS = 40
 ANY_STATE_MAX_JERK_RATIO = 50.0
 FEEDFORWARD_MODES = ("on_path", "any_state")
+ANY_STATE_NEEDS_NO_COMPENSATION = (
+    "any_state needs compensation.enabled: false (with the inner-loop compensation the lag lead "
+    "replaces the roll/pitch body-rate feed-forward)"
+)
 
 
 class _Evaluation(NamedTuple):
@@ -182,6 +186,8 @@ class PathFollower:
         self.law = ControlLaw(self.gains, self.limits)
         if feedforward not in FEEDFORWARD_MODES:
             raise InputError("feedforward", f"must be one of {', '.join(FEEDFORWARD_MODES)}, got {feedforward!r}")
+        if feedforward == "any_state" and compensator is not None:
+            raise InputError("feedforward", ANY_STATE_NEEDS_NO_COMPENSATION)
         self.feedforward = feedforward
         # eta2_ref(eta1) from a speed profile (None: the constant ``speed``, as in the paper)
         self.profile = SpeedProfile(path, speed_profile, self.limits, speed) if speed_profile is not None else None
@@ -432,17 +438,20 @@ class PathFollower:
         ax, ay, az = res.accel
         # on-path jerk at eta2_ref (eqs. 25-27: jerk = sigma_sss eta2_ref^3), faded out with the
         # fallback weight (no on-path motion to anticipate far away): feed-forward of the body
-        # rates and of the inner loop's lag
+        # rates (the paper's ideal inner loop) or of the identified inner loop's lag (compensated)
         jerk = self._onpath_jerk(ev)
-        jerk_rates = jerk
-        if self.feedforward == "any_state":
+        if comp is not None:
+            # the lag lead below replaces the roll/pitch rate feed-forward: the attitude loop
+            # tracks the led setpoint, and omega_ff on top of it would lead twice
+            jerk_rates: Vec = (0.0, 0.0, 0.0)
+        elif self.feedforward == "any_state":
             jerk_rates = self._closed_loop_jerk(y, v, lam, terms, res.accel, offsets)
+        else:
+            jerk_rates = jerk
         if comp is not None:
             # the setpoint that makes the identified vehicle fly res.accel, kept feasible; the
             # lag's phase is inverted along the path by leading with lag * jerk
-            lag_xy, lag_z = comp.lag[0], comp.lag[2]
-            lead = (ax + lag_xy * jerk[0], ay + lag_xy * jerk[1], az + lag_z * jerk[2])
-            sp = comp.invert(t_s, lead, v)
+            sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v)
             fc = law.thrust_set.clip((sp[0], sp[1], sp[2] + G))
             ax, ay, az = fc[0], fc[1], fc[2] - G
             comp.record(t_s, (ax, ay, az))

@@ -259,9 +259,8 @@ class TrajectoryTracker:
         (ax, ay, az), scaled = self._allocate(ref.accel_m_s2, u)
         jerk = ref.jerk_m_s3
         if comp is not None:
-            lag_xy, lag_z = comp.lag[0], comp.lag[2]
-            lead = (ax + lag_xy * jerk[0], ay + lag_xy * jerk[1], az + lag_z * jerk[2])
-            sp = comp.invert(t_s, lead, v_law)
+            # as in the path follower: the lag lead replaces the roll/pitch rate feed-forward
+            sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v_law)
             fc = self.law.thrust_set.clip((sp[0], sp[1], sp[2] + G))
             ax, ay, az = fc[0], fc[1], fc[2] - G
             comp.record(t_s, (ax, ay, az))
@@ -272,7 +271,7 @@ class TrajectoryTracker:
         yaw_rate = dpsi * ref.speed_m_s
         axes = attitude_from_thrust(f, psi)
         q = quaternion_from_axes(*axes)
-        omega = body_rates(axes, thrust, jerk, yaw_rate)
+        omega = body_rates(axes, thrust, (0.0, 0.0, 0.0) if comp is not None else jerk, yaw_rate)
         if not _finite((ax, ay, az), q, omega, (thrust, psi, yaw_rate)):
             raise InputError("state", f"no finite command at position {list(y)}, velocity {list(v)}")
         # report the measured state at the closest point, as the follower does

@@ -206,6 +206,46 @@ def test_attractive_from_random_starts(seed: int) -> None:
     assert t_conv < 15.0
 
 
+@pytest.mark.parametrize("yaw_mode", ["constant", "tangent"])
+def test_lag_lead_replaces_the_roll_pitch_rate_feed_forward(yaw_mode: str) -> None:
+    """With the compensator, the lag lead (lag * on-path jerk) anticipates the path's motion and
+    the command's body rates carry the yaw-rate feed-forward only: the attitude loop tracks the
+    led setpoint, so the paper's omega_ff on top would lead twice. Without it: the paper's omega_ff."""
+    from pf_offboard.control import YawSpec
+    from pf_offboard.control.feedforward import attitude_from_thrust, body_rates
+    from pf_offboard.control.types import GRAVITY_M_S2
+
+    path = _paper_path()
+    yaw = YawSpec(mode=yaw_mode)
+    speed = -1.5
+    gains = gains_for_vehicle(MODEL)
+    worst_paper = 0.0
+    for lam in np.linspace(0.0, path.lam_max, 13)[:-1]:
+        q = path.eval_floats(float(lam))
+        t = np.array(q[3:6]) / np.linalg.norm(q[3:6])
+        p, v = tuple(q[0:3]), tuple(speed * t)
+        paper = PathFollower(path, speed, gains=gains, yaw=yaw).update(p, v)
+        comp = PathFollower(path, speed, gains=gains, yaw=yaw, compensator=InnerLoopCompensator(MODEL))
+        cmd = comp.update(p, v, time_s=0.0)
+        f = (cmd.acceleration[0], cmd.acceleration[1], cmd.acceleration[2] + GRAVITY_M_S2)
+        yaw_only = body_rates(attitude_from_thrust(f, cmd.yaw), cmd.thrust, (0.0, 0.0, 0.0), cmd.yaw_rate)
+        np.testing.assert_allclose(cmd.body_rates, yaw_only, atol=1e-12)
+        if yaw_mode == "constant":
+            assert np.abs(cmd.body_rates).max() < 1e-12
+        worst_paper = max(worst_paper, float(np.linalg.norm(paper.body_rates[:2])))
+    assert worst_paper > 0.1  # the paper's omega_ff is there without the compensator (rad/s)
+    # and the lead itself: accel + lag * jerk per axis
+    c = InnerLoopCompensator(MODEL)
+    assert c.lead((1.0, 2.0, 3.0), (10.0, -10.0, 5.0)) == pytest.approx((1.0 + 0.8, 2.0 - 0.8, 3.0 + 0.2))
+
+
+def test_any_state_feed_forward_is_refused_with_the_compensator() -> None:
+    with pytest.raises(InputError) as err:
+        PathFollower(_paper_path(), -1.5, feedforward="any_state", compensator=InnerLoopCompensator(MODEL))
+    assert err.value.field == "feedforward" and "compensation.enabled: false" in err.value.reason
+    PathFollower(_paper_path(), -1.5, feedforward="any_state")  # the paper's ideal inner loop: fine
+
+
 def test_gains_from_model_keep_the_margin() -> None:
     assert gains_for_vehicle(VehicleModel()) == Gains()  # ideal inner loop: the paper's gains
     slow = VehicleModel(accel_lag_xy_s=0.2, accel_delay_s=0.1)
