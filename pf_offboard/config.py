@@ -95,7 +95,7 @@ class FlightConfig:
     # time constant (s) of the correction that makes the velocity estimate agree with the position
     # estimate's derivative (pf_offboard.app.estimator); None (null): the velocity as reported.
     # 0.5 s: on the real PX4 SIH 4.7 / 4.9 cm cross-track RMS (1 s: 5.0-7.5; off: 10.9-17.7)
-    velocity_correction_s: float | None = 0.5
+    velocity_correction_s: float | None = 0.3
 
 
 @dataclass(frozen=True)
