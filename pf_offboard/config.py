@@ -94,7 +94,8 @@ class FlightConfig:
     attitude_time_constant_s: float | None = None
     # time constant (s) of the correction that makes the velocity estimate agree with the position
     # estimate's derivative (pf_offboard.app.estimator); None (null): the velocity as reported.
-    # 0.5 s: on the real PX4 SIH 4.7 / 4.9 cm cross-track RMS (1 s: 5.0-7.5; off: 10.9-17.7)
+    # 0.3 s: on the real PX4 SIH 3.5-4.2 cm cross-track RMS in every output mode (0.5 s: 3.9-5.3;
+    # 1 s: 5.0-7.5; off: 10.9-17.7), docs/app.md
     velocity_correction_s: float | None = 0.3
 
 

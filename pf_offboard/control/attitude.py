@@ -15,9 +15,10 @@ The law (tilt-prioritised reduced attitude control)::
     ω     = ω_ff + s_xy · ω_fb,xy  (+ the same for z with s_z)
 
 For small errors this is a first-order decay of the tilt error with time constant ``τ`` and of the
-heading error with ``τ_yaw``. ``ω_ff`` is the command's ``body_rates``: the paper's feed-forward without the
-inner-loop compensator; with it only the yaw rate (the compensator's lag lead already puts the
-setpoint ahead of the path's motion, and a roll/pitch feed-forward on top would lead twice). The roll/pitch part of ``ω`` is bounded by
+heading error with ``τ_yaw``. ``ω_ff`` is the command's ``body_rates``: the paper's feed-forward
+without the inner-loop compensator; with it only the yaw rate (the compensator's lag lead already
+puts the setpoint ahead of the path's motion, and a roll/pitch feed-forward on top would lead
+twice). The roll/pitch part of ``ω`` is bounded by
 ``max_roll_pitch_rate_rad_s`` (Euclidean norm) and the yaw part by ``max_yaw_rate_rad_s``: the
 feedback is scaled by the largest ``s ∈ [0, 1]`` that keeps the total inside its bound, so its
 direction is kept; only a feed-forward that alone exceeds a bound is itself scaled down to it.

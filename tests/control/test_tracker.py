@@ -144,3 +144,18 @@ def test_from_config_shares_the_followers_settings():
     assert (t.speed, t.gains, t.yaw, t.limits) == (f.speed, f.gains, f.yaw, f.limits)
     assert t.compensator is not None and t.compensator.model == f.compensator.model
     assert isinstance(t.path, Path) and t.path.length_m == f.path.length_m
+
+
+def test_with_the_compensator_the_lag_lead_replaces_the_rate_feed_forward(paper_path):
+    """As in the path follower: with the compensator only the yaw-rate feed-forward is sent (here
+    constant yaw: no body rates at all); without it the reference's jerk gives the paper's rates."""
+    from pf_offboard.control import VehicleModel
+    from pf_offboard.control.compensator import InnerLoopCompensator
+
+    lam0 = 0.3 * paper_path.lam_max
+    y0, v0 = paper_path.eval(lam0).sigma, 1.5 * paper_path.frame(lam0).t
+    plain, _, _, _ = fly(TrajectoryTracker(paper_path, 1.5), y0, v0, 1.0)
+    model = VehicleModel(accel_lag_xy_s=0.1, accel_lag_z_s=0.05, accel_delay_s=0.1)
+    comp, _, _, _ = fly(TrajectoryTracker(paper_path, 1.5, compensator=InnerLoopCompensator(model)), y0, v0, 1.0)
+    assert max(float(np.linalg.norm(c.body_rates[:2])) for c in plain) > 0.1
+    assert max(float(np.abs(c.body_rates).max()) for c in comp) < 1e-12
