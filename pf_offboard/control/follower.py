@@ -441,20 +441,19 @@ class PathFollower:
         # rates (the paper's ideal inner loop) or of the identified inner loop's lag (compensated)
         jerk = self._onpath_jerk(ev)
         if comp is not None:
-            # the lag lead below replaces the roll/pitch rate feed-forward: the attitude loop
-            # tracks the led setpoint, and omega_ff on top of it would lead twice
-            jerk_rates: Vec = (0.0, 0.0, 0.0)
-        elif self.feedforward == "any_state":
-            jerk_rates = self._closed_loop_jerk(y, v, lam, terms, res.accel, offsets)
-        else:
-            jerk_rates = jerk
-        if comp is not None:
             # the setpoint that makes the identified vehicle fly res.accel, kept feasible; the
-            # lag's phase is inverted along the path by leading with lag * jerk
+            # lag's phase is inverted along the path by leading with lag * jerk. That lead
+            # replaces the roll/pitch rate feed-forward: the attitude loop tracks the led
+            # setpoint, and omega_ff on top of it would lead twice
             sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v)
             fc = law.thrust_set.clip((sp[0], sp[1], sp[2] + G))
             ax, ay, az = fc[0], fc[1], fc[2] - G
             comp.record(t_s, (ax, ay, az))
+            jerk_rates: Vec = (0.0, 0.0, 0.0)
+        elif self.feedforward == "any_state":  # refused with a compensator (constructor)
+            jerk_rates = self._closed_loop_jerk(y, v, lam, terms, res.accel, offsets)
+        else:
+            jerk_rates = jerk
         f = (ax, ay, az + G)
         thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
         tilt, thrust_sat = law.thrust_set.active(f)

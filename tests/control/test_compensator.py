@@ -219,12 +219,14 @@ def test_lag_lead_replaces_the_roll_pitch_rate_feed_forward(yaw_mode: str) -> No
     yaw = YawSpec(mode=yaw_mode)
     speed = -1.5
     gains = gains_for_vehicle(MODEL)
+    paper_law = PathFollower(path, speed, gains=gains, yaw=yaw)  # the paper's law: no compensator state
     worst_paper = 0.0
     for lam in np.linspace(0.0, path.lam_max, 13)[:-1]:
         q = path.eval_floats(float(lam))
         t = np.array(q[3:6]) / np.linalg.norm(q[3:6])
         p, v = tuple(q[0:3]), tuple(speed * t)
-        paper = PathFollower(path, speed, gains=gains, yaw=yaw).update(p, v)
+        paper = paper_law.update(p, v)
+        # a fresh compensator per state: its first sample has no setpoint history to predict over
         comp = PathFollower(path, speed, gains=gains, yaw=yaw, compensator=InnerLoopCompensator(MODEL))
         cmd = comp.update(p, v, time_s=0.0)
         f = (cmd.acceleration[0], cmd.acceleration[1], cmd.acceleration[2] + GRAVITY_M_S2)

@@ -75,8 +75,8 @@ def test_one_lead_not_two_in_attitude_and_rates_output(tmp_path: Path, output_mo
     well, the path was led twice (seed 0: 2.1 cm, 3.3 cm/s in attitude, 1.9 cm, 2.8 cm/s in rates).
     With the lead alone (the command's body rates carry the yaw rate only) the same flights are
     within 1 cm and 1.5 cm/s (measured 0.7 cm, 0.9 / 0.8 cm/s; the real ArduCopter SITL, velocity
-    correction 0.5 s, went from
-    2.0 cm, 2.1 cm/s to 1.6 cm, 1.1 cm/s in attitude and from 2.7 cm, 2.9 cm/s to 1.4 cm, 1.1 cm/s in rates)."""
+    correction 0.5 s, went from 2.0 cm, 2.1 cm/s to 1.6 cm, 1.1 cm/s in attitude and from 2.7 cm,
+    2.9 cm/s to 1.4 cm, 1.1 cm/s in rates)."""
     ct, err = _flown(tmp_path, True, output_mode)
     ct_rms, err_rms = math.sqrt(float(np.mean(ct**2))), math.sqrt(float(np.mean(err**2)))
     print(f"\n{output_mode}: {100 * ct_rms:.2f} cm RMS, speed error {100 * err_rms:.2f} cm/s RMS")
