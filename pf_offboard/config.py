@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from pf_offboard.control.follower import FEEDFORWARD_MODES
 from pf_offboard.control.profile import SpeedProfileSpec
 from pf_offboard.control.types import GRAVITY_M_S2, MIN_THRUST_FLOOR_M_S2, Gains, Limits, VehicleModel, YawSpec
 from pf_offboard.errors import ConfigError, InputError
@@ -545,7 +546,6 @@ TOP_LEVEL = (
     "path", "speed_m_s", "gains", "yaw", "limits", "flight", "vehicle", "compensation", "safety", "speed_profile",
     "feedforward", "controller",
 )  # fmt: skip
-FEEDFORWARD_MODES = ("on_path", "any_state")
 
 
 def _speed_profile(data: Any) -> SpeedProfileSpec | None:
