@@ -185,13 +185,26 @@ REAL_EKF2_ERROR_BANDS_CM_S = {
 }
 
 
-def _band_rms(z: np.ndarray, rate_hz: float) -> np.ndarray:
-    """RMS of z (demeaned, Hann window) in each of ERROR_BANDS_HZ, as the real figures were made."""
+def _band_rms(z: np.ndarray, rate_hz: float, bands: tuple[tuple[float, float], ...] = ERROR_BANDS_HZ) -> np.ndarray:
+    """RMS of z (demeaned, Hann window) in each band, as the real figures were made."""
     z = z - z.mean()
     power = np.abs(np.fft.rfft(z * np.hanning(len(z)))) ** 2
     freq = np.fft.rfftfreq(len(z), 1.0 / rate_hz)
-    share = np.array([power[(freq >= lo) & (freq < hi)].sum() for lo, hi in ERROR_BANDS_HZ]) / power.sum()
+    share = np.array([power[(freq >= lo) & (freq < hi)].sum() for lo, hi in bands]) / power.sum()
     return np.sqrt(share * np.mean(z * z))
+
+
+def _stationary_error(noise: EstimatorNoise, seed: int, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal (position, velocity) error sampled at rate_hz over the last 15 s of 45 (stationary)."""
+    t = np.arange(1, int(45.0 * rate_hz) + 1) / rate_hz
+    n = int(15.0 * rate_hz)
+    err = EstimatorError(noise, np.random.default_rng(seed))
+    p, v = [], []
+    for ti in t:
+        err.advance_to(float(ti))
+        p.append(err.position_error_ned_m[:2])
+        v.append(err.velocity_error_ned_m_s[:2])
+    return np.array(p)[-n:], np.array(v)[-n:]
 
 
 def test_error_spectrum_matches_ekf2_on_px4_sih() -> None:
@@ -200,18 +213,10 @@ def test_error_spectrum_matches_ekf2_on_px4_sih() -> None:
     0.7-1.4x of the real figure (the previous white-noise-heavy preset had 1.4-1.75x above 1.2 Hz and
     0.3-0.5x of the position's motion at 0.1-0.7 Hz)."""
     noise = preset("px4-sih").estimator
-    rate_hz, window_s = 50.0, 15.0
-    t = np.arange(1, int(45.0 * rate_hz) + 1) / rate_hz  # the last 15 s of 45 (stationary)
-    n = int(window_s * rate_hz)
+    rate_hz = 50.0
     vel, dpos = [], []
     for seed in range(24):
-        err = EstimatorError(noise, np.random.default_rng(seed))
-        p, v = [], []
-        for ti in t:
-            err.advance_to(float(ti))
-            p.append(err.position_error_ned_m[:2])
-            v.append(err.velocity_error_ned_m_s[:2])
-        p, v = np.array(p)[-n:], np.array(v)[-n:]
+        p, v = _stationary_error(noise, seed, rate_hz)
         for axis in range(2):
             vel.append(_band_rms(v[:, axis], rate_hz) ** 2)
             d = np.convolve(np.gradient(p[:, axis], 1.0 / rate_hz), np.ones(10) / 10, "same")
@@ -237,24 +242,12 @@ def test_reported_position_and_velocity_disagree_as_ekf2s_do() -> None:
 
     def consistency(noise: EstimatorNoise) -> np.ndarray:
         rate_hz = 100.0
-        t = np.arange(1, int(45.0 * rate_hz) + 1) / rate_hz
-        n = int(15.0 * rate_hz)
         power = []
         for seed in range(8):
-            err = EstimatorError(noise, np.random.default_rng(seed))
-            p, v = [], []
-            for ti in t:
-                err.advance_to(float(ti))
-                p.append(err.position_error_ned_m[:2])
-                v.append(err.velocity_error_ned_m_s[:2])
-            p, v = np.array(p)[-n:], np.array(v)[-n:]
+            p, v = _stationary_error(noise, seed, rate_hz)
             for axis in range(2):
                 z = np.gradient(p[:, axis], 1.0 / rate_hz) - v[:, axis]
-                z = z - z.mean()
-                spec = np.abs(np.fft.rfft(z * np.hanning(len(z)))) ** 2
-                freq = np.fft.rfftfreq(len(z), 1.0 / rate_hz)
-                share = np.array([spec[(freq >= lo) & (freq < hi)].sum() for lo, hi in CONSISTENCY_BANDS_HZ]) / spec.sum()
-                power.append(share * np.mean(z * z))
+                power.append(_band_rms(z, rate_hz, CONSISTENCY_BANDS_HZ) ** 2)
         return 100.0 * np.sqrt(np.mean(power, axis=0))
 
     real = np.array(REAL_EKF2_CONSISTENCY_BANDS_CM_S)
