@@ -23,6 +23,8 @@ import yaml
 
 from pf_offboard.sim import SimSpec, simulate
 
+from .helpers import errors, late_records
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "configs" / "paper.yaml"
 
@@ -44,10 +46,7 @@ def _flown(tmp: Path, compensated: bool, output_mode: str = "attitude") -> tuple
     """Cross-track (m) and speed error (m/s) samples from activation + 8 s."""
     spec = SimSpec(autopilot="ardupilot", vehicle="arducopter", laps=2.0, seed=0, name="flight")
     res = simulate(_config(tmp, compensated, output_mode), spec, tmp / (f"comp-{output_mode}" if compensated else "base"))
-    recs = [r for r in res.records if r.mode == "following"]
-    t0 = recs[0].time_s
-    late = [r for r in recs if r.time_s > t0 + 8.0]
-    return np.array([r.cross_track_m for r in late]), np.array([r.eta2_m_s - r.speed_ref_m_s for r in late])
+    return errors(late_records(res.records))
 
 
 def _fly(tmp: Path, compensated: bool) -> tuple[float, float]:

@@ -20,25 +20,15 @@ import numpy as np
 import pytest
 import yaml
 
-from pf_offboard.sim import SimSpec, simulate
+from pf_offboard.sim import SimSpec
 
-ROOT = Path(__file__).resolve().parents[2]
-PX4_SIH = ROOT / "configs" / "px4-sih.yaml"
+from .helpers import PX4_SIH, errors, fly_px4_sih
 
 
 def _fly(tmp: Path, name: str, compensation: dict[str, float]) -> tuple[float, float, float]:
     """(cross-track RMS m, speed error RMS m/s, mean speed error m/s) from activation + 8 s."""
-    data = yaml.safe_load(PX4_SIH.read_text())
-    data["compensation"].update(compensation)
-    config = tmp / f"{name}.yaml"
-    config.write_text(yaml.safe_dump(data))
     spec = SimSpec(autopilot="px4", vehicle="px4-sih", output_mode="rates", laps=2.0, seed=1, name="flight")
-    res = simulate(config, spec, tmp / name)
-    recs = [r for r in res.records if r.mode == "following"]
-    late = [r for r in recs if r.time_s > recs[0].time_s + 8.0]
-    assert len(late) > 500
-    err = np.array([r.eta2_m_s - r.speed_ref_m_s for r in late])
-    ct = np.array([r.cross_track_m for r in late])
+    ct, err = errors(fly_px4_sih(tmp, name, lambda data: data["compensation"].update(compensation), spec))
     return math.sqrt(float(np.mean(ct**2))), math.sqrt(float(np.mean(err**2))), float(np.mean(err))
 
 
