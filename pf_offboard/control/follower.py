@@ -449,6 +449,10 @@ class PathFollower:
             fc = law.thrust_set.clip((sp[0], sp[1], sp[2] + G))
             ax, ay, az = fc[0], fc[1], fc[2] - G
             comp.record(t_s, (ax, ay, az))
+            if comp.holds:  # the faster axis group's setpoint goes out late (InnerLoopCompensator.horizon_s)
+                o = comp.outgoing(t_s)
+                fc = law.thrust_set.clip((o[0], o[1], o[2] + G))
+                ax, ay, az = fc[0], fc[1], fc[2] - G
             jerk_rates: Vec = (0.0, 0.0, 0.0)
         elif self.feedforward == "any_state":  # refused with a compensator (constructor)
             jerk_rates = self._closed_loop_jerk(y, v, lam, terms, res.accel, offsets)

@@ -239,7 +239,7 @@ class TrajectoryTracker:
         if comp is not None:
             y_law, v_law = comp.predict(t_s, y, v)
             if _finite(y_law, v_law):
-                t_law = t_s + comp.delay_s  # the state predicted to when this setpoint acts
+                t_law = t_s + comp.horizon_s  # the state predicted to when this setpoint acts
             else:
                 comp.reset()
                 y_law, v_law = y, v
@@ -264,6 +264,10 @@ class TrajectoryTracker:
             fc = self.law.thrust_set.clip((sp[0], sp[1], sp[2] + G))
             ax, ay, az = fc[0], fc[1], fc[2] - G
             comp.record(t_s, (ax, ay, az))
+            if comp.holds:  # as in the path follower: the faster axis group's setpoint goes out late
+                o = comp.outgoing(t_s)
+                fc = self.law.thrust_set.clip((o[0], o[1], o[2] + G))
+                ax, ay, az = fc[0], fc[1], fc[2] - G
         f = (ax, ay, az + G)
         thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
         tilt, thrust_sat = self.law.thrust_set.active(f)

@@ -47,7 +47,8 @@ def vehicle_yaml(ident: Identification, keep: dict[str, Any] | None = None) -> s
     """The ``vehicle:`` config section (VehicleModel's field names), as YAML text; ``keep``: values
     of an existing section for the fields this fit did not determine (rate_time_constant_s)."""
     fields = {**(keep or {}), **model_fields(ident)}
-    body = "".join(f"  {k}: {v:g}\n" for k, v in fields.items())
+    # null: the field's default (accel_delay_z_s: the horizontal delay), replacing a kept value
+    body = "".join(f"  {k}: {'null' if v is None else format(v, 'g')}\n" for k, v in fields.items())
     return "vehicle:  # identified by pf-offboard identify\n" + body
 
 
