@@ -10,7 +10,10 @@ app's setpoints (out: SET_POSITION_TARGET_LOCAL_NED, SET_ATTITUDE_TARGET) — by
 their original UNIX stamps, and writes them as deterministic ``.tlog.gz`` (gzip mtime 0):
 
     python scripts/extract_identify_logs.py [SRC_DIR] [OUT_DIR]
+    python scripts/extract_identify_logs.py --one SRC.tlog DST.tlog.gz
 
+The second form trims one log, e.g. the ``identify --connect`` excitation flights against the real
+PX4 SIH in tests/data/identify/px4-sih-excitation-*.tlog.gz (their full logs are not kept here).
 SRC_DIR defaults to ../shared/data/px4-sih (beside the repository), OUT_DIR to tests/data/identify.
 Running it twice gives identical bytes.
 """
@@ -57,6 +60,10 @@ def extract(src: Path, dst: Path) -> int:
 
 
 def main(argv: list[str]) -> int:
+    if argv[:1] == ["--one"]:  # one log: --one SRC.tlog[.gz] DST.tlog.gz (e.g. an identify --connect flight)
+        size = extract(Path(argv[1]), Path(argv[2]))
+        print(f"{argv[2]}: {size / 1024:.0f} KiB")
+        return 0
     src_dir = Path(argv[0]) if argv else ROOT.parent / "shared" / "data" / "px4-sih"
     out_dir = Path(argv[1]) if len(argv) > 1 else ROOT / "tests" / "data" / "identify"
     out_dir.mkdir(parents=True, exist_ok=True)

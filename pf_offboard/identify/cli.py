@@ -78,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
         for line in report_lines(ident, data):
             print(line)
     if args.write_config:
+        if reason := ident.unflyable():
+            raise InputError("--write-config", reason)
         base = Path(args.config) if args.config else None
         write_config(Path(args.write_config), ident, base)
         if not args.json:

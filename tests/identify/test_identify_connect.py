@@ -76,3 +76,26 @@ def test_leaving_the_box_aborts_to_hold(tmp_path, capsys) -> None:
     recs = [r for r in read_steplog(tmp_path / "log" / "identify.csv") if r.active]
     assert recs[-1].time_s - recs[0].time_s < 10.0  # stopped early, not after the full excitation
     assert code in (0, 2)  # fitted what was flown, or said why it could not (too short)
+
+
+def test_excitation_stays_in_its_box_on_an_ekf_like_estimate(tmp_path, capsys) -> None:
+    """The calibrated ``px4-sih`` preset (EKF2-like position and velocity errors, a velocity that
+    disagrees with its position's derivative) with the shipped px4-sih.yaml: the excitation is
+    flown in full inside the 1 m box, as on the real PX4 SIH once the estimate's velocity is made
+    consistent with its position (flight.velocity_correction_s, as fly does)."""
+    config = tmp_path / "px4-sih.yaml"
+    config.write_text((REPO / "configs" / "px4-sih.yaml").read_text())
+    with run_in_thread(_mock("px4-sih")) as mock:
+        code = _run(mock.ports.udp, config, tmp_path / "log", "--duration", "14", "--json")
+        mode = mock.call(lambda m: m.autopilot.mode.name)
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "aborted" not in captured.err and mode == "AUTO.LOITER"
+    recs = [r for r in read_steplog(tmp_path / "log" / "identify.csv") if r.active]
+    pos = np.array([r.position_enu_m for r in recs])
+    start = np.array([HOVER_NED[1], HOVER_NED[0], -HOVER_NED[2]])
+    print(f"\nlargest offset from the start {np.max(np.abs(pos - start)):.2f} m")
+    # measured 0.28 m; damping on the reported velocity alone (before): 0.82 m here, and out of the
+    # box after 5.8 s on the real PX4 SIH, whose velocity error is larger than the preset's
+    assert np.max(np.abs(pos - start)) < 0.5
+    assert recs[-1].time_s - recs[0].time_s > 14.0
