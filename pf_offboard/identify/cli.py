@@ -86,5 +86,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"vehicle: section written to {args.write_config}")
     elif not args.json:
         print()
+        if reason := ident.unflyable():
+            print(f"# do not fly this section: {reason.removesuffix('; nothing written')}")
         print(vehicle_yaml(ident), end="")
     return 0

@@ -101,6 +101,14 @@ def test_the_default_excitation_on_px4_sih_is_too_uncertain_to_write(tmp_path, c
     assert code == 2 and len(err) == 1, err
     assert "--write-config" in err[0] and "xy R^2 0.65" in err[0] and "nothing written" in err[0]
     assert not out.exists()
+    # printed instead of written: the section says so itself, as a comment that keeps it YAML
+    assert main(["identify", str(DATA / "px4-sih-excitation-default.tlog.gz")]) == 0
+    printed = capsys.readouterr().out
+    section = printed[printed.index("# do not fly this section"):]
+    assert section.startswith("# do not fly this section: fit too uncertain to fly (xy R^2 0.65")
+    import yaml
+
+    assert yaml.safe_load(section)["vehicle"]["accel_delay_s"] == 0.202
 
 
 def test_the_stronger_excitation_on_px4_sih_is_written(tmp_path, capsys) -> None:
