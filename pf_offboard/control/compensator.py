@@ -34,8 +34,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 
-from pf_offboard.control.types import VehicleModel
+from pf_offboard.control.types import GRAVITY_M_S2, VehicleModel
 from pf_offboard.errors import InputError
 
 Vec = tuple[float, float, float]
@@ -244,6 +245,20 @@ class InnerLoopCompensator:
                 value = a[i]
             out.append(value)
         return (out[0], out[1], out[2])
+
+    def commit(self, time_s: float, setpoint: Vec, clip_thrust: Callable[[Vec], Vec]) -> Vec:
+        """The setpoint to send now for the inverted ``setpoint`` computed at ``time_s`` (ENU,
+        gravity excluded): kept feasible by ``clip_thrust`` (a thrust vector, gravity included),
+        recorded, and — when a group is held back — the :meth:`outgoing` one, feasible too."""
+        g = GRAVITY_M_S2
+        fc = clip_thrust((setpoint[0], setpoint[1], setpoint[2] + g))
+        sent = (fc[0], fc[1], fc[2] - g)
+        self.record(time_s, sent)
+        if self.holds:
+            o = self.outgoing(time_s)
+            fc = clip_thrust((o[0], o[1], o[2] + g))
+            sent = (fc[0], fc[1], fc[2] - g)
+        return sent
 
     def record(self, time_s: float, setpoint: Vec) -> None:
         """Remember the setpoint the law asked for at ``time_s`` (ENU acceleration, gravity

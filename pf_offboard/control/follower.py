@@ -446,13 +446,8 @@ class PathFollower:
             # replaces the roll/pitch rate feed-forward: the attitude loop tracks the led
             # setpoint, and omega_ff on top of it would lead twice
             sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v)
-            fc = law.thrust_set.clip((sp[0], sp[1], sp[2] + G))
-            ax, ay, az = fc[0], fc[1], fc[2] - G
-            comp.record(t_s, (ax, ay, az))
-            if comp.holds:  # the faster axis group's setpoint goes out late (InnerLoopCompensator.horizon_s)
-                o = comp.outgoing(t_s)
-                fc = law.thrust_set.clip((o[0], o[1], o[2] + G))
-                ax, ay, az = fc[0], fc[1], fc[2] - G
+            # feasible, recorded, and the faster axis group's held back (InnerLoopCompensator.horizon_s)
+            ax, ay, az = comp.commit(t_s, sp, law.thrust_set.clip)
             jerk_rates: Vec = (0.0, 0.0, 0.0)
         elif self.feedforward == "any_state":  # refused with a compensator (constructor)
             jerk_rates = self._closed_loop_jerk(y, v, lam, terms, res.accel, offsets)

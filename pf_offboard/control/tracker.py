@@ -261,13 +261,7 @@ class TrajectoryTracker:
         if comp is not None:
             # as in the path follower: the lag lead replaces the roll/pitch rate feed-forward
             sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v_law)
-            fc = self.law.thrust_set.clip((sp[0], sp[1], sp[2] + G))
-            ax, ay, az = fc[0], fc[1], fc[2] - G
-            comp.record(t_s, (ax, ay, az))
-            if comp.holds:  # as in the path follower: the faster axis group's setpoint goes out late
-                o = comp.outgoing(t_s)
-                fc = self.law.thrust_set.clip((o[0], o[1], o[2] + G))
-                ax, ay, az = fc[0], fc[1], fc[2] - G
+            ax, ay, az = comp.commit(t_s, sp, self.law.thrust_set.clip)
         f = (ax, ay, az + G)
         thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
         tilt, thrust_sat = self.law.thrust_set.active(f)

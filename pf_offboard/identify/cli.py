@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
             print(line)
     if args.write_config:
         if reason := ident.unflyable():
-            raise InputError("--write-config", reason)
+            raise InputError("--write-config", f"{reason}; nothing written")
         base = Path(args.config) if args.config else None
         write_config(Path(args.write_config), ident, base)
         if not args.json:
@@ -87,6 +87,6 @@ def run(args: argparse.Namespace) -> int:
     elif not args.json:
         print()
         if reason := ident.unflyable():
-            print(f"# do not fly this section: {reason.removesuffix('; nothing written')}")
+            print(f"# do not fly this section: {reason}")
         print(vehicle_yaml(ident), end="")
     return 0

@@ -109,7 +109,7 @@ class Identification:
         poor = [f"{f.group} R^2 {f.r2:.2f}" for f in (self.xy, self.z) if f.r2 < FLYABLE_R2]
         if not poor:
             return ""
-        return f"fit too uncertain to fly ({', '.join(poor)} < {FLYABLE_R2:g}); {STRONGER_EXCITATION}; nothing written"
+        return f"fit too uncertain to fly ({', '.join(poor)} < {FLYABLE_R2:g}); {STRONGER_EXCITATION}"
 
     def vehicle_model(self) -> VehicleModel:
         """The fit as a :class:`VehicleModel` (drag clamped at 0, values inside its bounds)."""
@@ -132,16 +132,16 @@ def model_fields(ident: Identification) -> dict[str, float | None]:
         return round(min(max(v, lo), hi), nd)
 
     delay_xy = clamp(ident.xy.delay_s, 0.0, 1.0)
-    delay_z: float | None = clamp(ident.z.delay_s, 0.0, 1.0)
+    delay_z = clamp(ident.z.delay_s, 0.0, 1.0)
     lag_z = clamp(ident.z.lag_s, 0.0, 2.0)
-    if delay_z is not None and delay_z < delay_xy:
+    faster_z = delay_z < delay_xy
+    if faster_z:
         lag_z = clamp(delay_z + lag_z - delay_xy, 0.0, 2.0)
-        delay_z = None
     return {
         "accel_lag_xy_s": clamp(ident.xy.lag_s, 0.0, 2.0),
         "accel_lag_z_s": lag_z,
         "accel_delay_s": delay_xy,
-        "accel_delay_z_s": delay_z,
+        "accel_delay_z_s": None if faster_z else delay_z,
         "accel_gain_xy": clamp(ident.xy.gain, 0.2, 5.0),
         "accel_gain_z": clamp(ident.z.gain, 0.2, 5.0),
         "drag_xy_1_s": clamp(ident.xy.drag_1_s, 0.0, 10.0),

@@ -69,25 +69,29 @@ def test_a_lockstep_clock_far_from_real_time_keeps_the_whole_flight(tmp_path, cl
     assert log.duration_s == pytest.approx(16.0, abs=0.3)
 
 
+def _fit(group: str, lag: float, delay: float):
+    """An AxisFit with these dynamics (gain 1, drag 0.5, R^2 0.99)."""
+    from pf_offboard.identify.fit import AxisFit
+
+    return AxisFit(group, lag, delay, 1.0, 0.5, (0.0,), 0.99, 0.1, 100, 1.0)
+
+
 def test_vehicle_model_writes_one_delay_for_a_faster_vertical_group() -> None:
-    from pf_offboard.identify.fit import AxisFit, Identification
+    from pf_offboard.identify.fit import Identification
 
-    def fit(group: str, lag: float, delay: float) -> AxisFit:
-        return AxisFit(group, lag, delay, 1.0, 0.5, (0.0,), 0.99, 0.1, 100, 1.0)
-
-    xy = fit("xy", 0.15, 0.05)
+    xy = _fit("xy", 0.15, 0.05)
     # a vertical rise (0.03 s) inside the horizontal dead time: the horizontal delay, no lag
-    m = Identification(xy, fit("z", 0.02, 0.01), None, 20.0, ()).vehicle_model()
+    m = Identification(xy, _fit("z", 0.02, 0.01), None, 20.0, ()).vehicle_model()
     assert m.accel_delay_s == pytest.approx(0.05) and m.accel_delay_z_s is None
     assert m.accel_lag_xy_s == pytest.approx(0.15) and m.accel_lag_z_s == 0.0
     # a longer vertical rise (0.11 s) is kept: the horizontal delay plus the rest as lag
-    m = Identification(xy, fit("z", 0.10, 0.01), None, 20.0, ()).vehicle_model()
+    m = Identification(xy, _fit("z", 0.10, 0.01), None, 20.0, ()).vehicle_model()
     assert m.accel_delay_z_s is None and m.accel_delay_s + m.accel_lag_z_s == pytest.approx(0.11)
     # a slower vertical group keeps its own delay (the compensator holds x/y back to it)
-    m = Identification(xy, fit("z", 0.02, 0.08), None, 20.0, ()).vehicle_model()
+    m = Identification(xy, _fit("z", 0.02, 0.08), None, 20.0, ()).vehicle_model()
     assert m.accel_delay_z_s == pytest.approx(0.08) and m.accel_lag_z_s == pytest.approx(0.02)
     # negative drag (not resolved) is written as 0, never as an invalid section
-    ident2 = Identification(replace(fit("xy", 0.1, 0.0), drag_1_s=-0.05), fit("z", 0.0, 0.0), None, 20.0, ())
+    ident2 = Identification(replace(_fit("xy", 0.1, 0.0), drag_1_s=-0.05), _fit("z", 0.0, 0.0), None, 20.0, ())
     assert ident2.vehicle_model().drag_xy_1_s == 0.0
 
 
@@ -115,13 +119,10 @@ def test_written_section_replaces_a_kept_vertical_delay_with_null() -> None:
     import yaml
 
     from pf_offboard.control import VehicleModel
-    from pf_offboard.identify.fit import AxisFit, Identification
+    from pf_offboard.identify.fit import Identification
     from pf_offboard.identify.report import vehicle_yaml
 
-    def fit(group: str, lag: float, delay: float) -> AxisFit:
-        return AxisFit(group, lag, delay, 1.0, 0.5, (0.0,), 0.99, 0.1, 100, 1.0)
-
-    ident = Identification(fit("xy", 0.10, 0.14), fit("z", 0.04, 0.04), None, 20.0, ())
+    ident = Identification(_fit("xy", 0.10, 0.14), _fit("z", 0.04, 0.04), None, 20.0, ())
     text = vehicle_yaml(ident, keep={"accel_delay_z_s": 0.04, "rate_time_constant_s": 0.05})
     section = yaml.safe_load(text)["vehicle"]
     assert section["accel_delay_z_s"] is None and section["accel_lag_z_s"] == 0.0

@@ -21,6 +21,7 @@ import pytest
 from pf_offboard.identify import identify, load_log
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "identify"
+PX4_SIH = Path(__file__).resolve().parents[2] / "configs" / "px4-sih.yaml"
 
 
 def _fit(name: str):
@@ -95,8 +96,7 @@ def test_the_default_excitation_on_px4_sih_is_too_uncertain_to_write(tmp_path, c
     from pf_offboard.cli import main
 
     out = tmp_path / "vehicle.yaml"
-    config = Path(__file__).resolve().parents[2] / "configs" / "px4-sih.yaml"
-    code = main(["identify", str(DATA / "px4-sih-excitation-default.tlog.gz"), "--config", str(config), "--write-config", str(out)])
+    code = main(["identify", str(DATA / "px4-sih-excitation-default.tlog.gz"), "--config", str(PX4_SIH), "--write-config", str(out)])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1, err
     assert "--write-config" in err[0] and "xy R^2 0.65" in err[0] and "nothing written" in err[0]
@@ -116,8 +116,7 @@ def test_the_stronger_excitation_on_px4_sih_is_written(tmp_path, capsys) -> None
     from pf_offboard.config import load_config
 
     out = tmp_path / "vehicle.yaml"
-    config = Path(__file__).resolve().parents[2] / "configs" / "px4-sih.yaml"
-    code = main(["identify", str(DATA / "px4-sih-excitation-strong.tlog.gz"), "--config", str(config), "--write-config", str(out)])
+    code = main(["identify", str(DATA / "px4-sih-excitation-strong.tlog.gz"), "--config", str(PX4_SIH), "--write-config", str(out)])
     assert code == 0, capsys.readouterr().err
     vehicle = load_config(out).vehicle
     # one delay for the faster vertical group (thrust 0.04 s rise against tilt's 0.16 s dead time)
