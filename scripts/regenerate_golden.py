@@ -52,20 +52,20 @@ GOLDENS: tuple[Golden, ...] = (
     Golden(
         "paper_hover_px4",
         PAPER,
-        SimSpec(start_enu_m=(0.0, -1.5, 2.0), autopilot="px4", rate_hz=50.0, duration_s=8.0, seed=1, epoch_unix_s=EPOCH_UNIX_S),
+        SimSpec(vehicle="fast", start_enu_m=(0.0, -1.5, 2.0), autopilot="px4", rate_hz=50.0, duration_s=8.0, seed=1, epoch_unix_s=EPOCH_UNIX_S),
         "paper path from hover at (0, -1.5, 2) m (PF1), PX4, acceleration setpoints",
     ),
     Golden(
         "paper_throw_px4",
         PAPER,
-        SimSpec(throw_enu=(1.0, -2.0, 1.2, 0.5, 1.0, 5.0), throw_height_m=2.0, autopilot="px4", rate_hz=50.0,
+        SimSpec(vehicle="fast", throw_enu=(1.0, -2.0, 1.2, 0.5, 1.0, 5.0), throw_height_m=2.0, autopilot="px4", rate_hz=50.0,
                 duration_s=6.0, seed=2, epoch_unix_s=EPOCH_UNIX_S),  # fmt: skip
         "paper path, thrown from (1, -2, 1.2) m at (0.5, 1, 5) m/s, activation at 2 m, PX4",
     ),
     Golden(
         "paper_hover_ardupilot",
         PAPER,
-        SimSpec(start_enu_m=(0.0, -1.5, 2.0), autopilot="ardupilot", output_mode="attitude", rate_hz=50.0,
+        SimSpec(vehicle="fast", start_enu_m=(0.0, -1.5, 2.0), autopilot="ardupilot", output_mode="attitude", rate_hz=50.0,
                 duration_s=6.0, seed=3, epoch_unix_s=EPOCH_UNIX_S),  # fmt: skip
         "paper path from hover, ArduPilot GUIDED, attitude + thrust setpoints",
     ),
@@ -131,7 +131,7 @@ def regenerate_figures(out_dir: Path = FIGURES, config: Path = FIGURE_CONFIG) ->
             group_config = config if group == "hover" else throw_config
             logs = []
             for name, start in starts.items():
-                spec = SimSpec(
+                spec = SimSpec(vehicle="fast", 
                     start_enu_m=start if group == "hover" else None,  # type: ignore[arg-type]
                     throw_enu=start if group == "throw" else None,
                     throw_height_m=FIGURE_THROW_HEIGHTS_M[name] if group == "throw" else 2.0,

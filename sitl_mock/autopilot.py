@@ -45,7 +45,13 @@ from sitl_mock.dynamics import (
     VehicleState,
     preset,
 )
-from sitl_mock.profiles import PROFILES, Behaviour, ModeSpec, ParamType
+from sitl_mock.profiles import (
+    ACCEL_DECOUPLE_PARAM,
+    PROFILES,
+    Behaviour,
+    ModeSpec,
+    ParamType,
+)
 from sitl_mock.rotations import euler_from_q
 from sitl_mock.setpoints import (
     AttitudeTarget,
@@ -103,6 +109,8 @@ class Autopilot:
         self._param_kinds = {p.name: p.kind for p in self.profile.params}
         self._param_names = sorted(self.params)
         self.params[self.profile.hover_param] = vehicle.hover_thrust
+        if ACCEL_DECOUPLE_PARAM in self.params:
+            self.params[ACCEL_DECOUPLE_PARAM] = 1.0 if vehicle.accel_decouple else 0.0
         spawn = config.spawn
         if spawn.kind == "hover":
             dyn_spawn = Spawn.hover(spawn.position_ned_m)
@@ -456,6 +464,10 @@ class Autopilot:
                 return [(None, self._param_value(name))]
             # The acceleration mapping uses the autopilot's parameter, as PX4/ArduPilot do.
             self.sim.params = self.sim.params.with_(hover_thrust=value)
+        if name == ACCEL_DECOUPLE_PARAM:
+            if value not in (0.0, 1.0):
+                return [(None, self._param_value(name))]
+            self.sim.params = self.sim.params.with_(accel_decouple=value == 1.0)
         self.params[name] = value
         return [(None, self._param_value(name))]
 

@@ -104,7 +104,7 @@ class _LoopClient(asyncio.DatagramProtocol):
 
 
 async def _in_one_loop(steps: int) -> float:
-    config = MockConfig(udp_local_port=0, udp_remote=None, lockstep=True, lockstep_dt_s=LOCKSTEP_DT_S,
+    config = MockConfig(vehicle="fast", udp_local_port=0, udp_remote=None, lockstep=True, lockstep_dt_s=LOCKSTEP_DT_S,
                         spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
     loop = asyncio.get_running_loop()
     async with MockAutopilot(config) as mock:
@@ -127,7 +127,7 @@ async def _in_one_loop(steps: int) -> float:
 
 
 def _subprocess_run(steps: int, keep_streams: bool) -> dict[str, Any]:
-    config = MockConfig(udp_local_port=0, udp_remote=None, lockstep=True, lockstep_dt_s=LOCKSTEP_DT_S,
+    config = MockConfig(vehicle="fast", udp_local_port=0, udp_remote=None, lockstep=True, lockstep_dt_s=LOCKSTEP_DT_S,
                         spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
     with spawn(config) as handle:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

@@ -101,6 +101,9 @@ class ParamSpec:
 
 
 HOVER_PARAM: Mapping[str, str] = MappingProxyType({"px4": "MPC_THR_HOVER", "ardupilot": "MOT_THST_HOVER"})
+# The parameter that switches the acceleration mapping's tilt between g alone (1) and the whole
+# demand (0); ArduPilot has none (it always tilts from g alone).
+ACCEL_DECOUPLE_PARAM = "MPC_ACC_DECOUPLE"
 
 PX4_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_DISARM_LAND", 2.0),  # s, auto-disarm after landing
@@ -110,6 +113,7 @@ PX4_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_RC_IN_MODE", 1, ParamType.INT32),
     ParamSpec("MAV_SYS_ID", 1, ParamType.INT32),
     ParamSpec("MIS_TAKEOFF_ALT", 2.5),  # m
+    ParamSpec("MPC_ACC_DECOUPLE", 1, ParamType.INT32),  # tilt from g alone (replaced by the vehicle's)
     ParamSpec("MPC_LAND_SPEED", 0.7),  # m/s
     ParamSpec("MPC_THR_HOVER", 0.5),  # 0..1, replaced by the vehicle's true hover thrust
     ParamSpec("MPC_TKO_SPEED", 1.5),  # m/s

@@ -4,6 +4,11 @@ Starts ``python -m sitl_mock`` (PX4 profile, lockstep, ephemeral UDP port) in a 
 runs exactly what ``pf-offboard fly`` runs against it over real MAVLink: take-off to 2 m below
 the paper's start point (0, −1.5, 2) m, convergence onto the path, two laps at η2_ref = −1.5 m/s,
 hand-back in AUTO.LOITER. Prints the flight summary, writes the logs and the paper-style figures.
+
+The mock vehicle is the autopilot's realistic preset (``px4-sih``: PX4's SIH quad, calibrated
+against the real one, EKF-like estimate error; ``arducopter`` for the ArduPilot profile), flown
+with the shipped config made for it; ``--vehicle fast`` flies the paper's ideal vehicle with the
+paper's own config and gains.
 """
 
 from __future__ import annotations
@@ -17,10 +22,18 @@ from pf_offboard.errors import InputError
 
 # The paper's first experiment starts at (0, -1.5, 2) m ENU: spawn on the ground below it.
 START_ENU_M = (0.0, -1.5, 2.0)
+# The mock vehicle per autopilot profile (its realistic preset), and the shipped config (the paper's
+# path) made for each vehicle the demo flies.
+DEMO_VEHICLES: dict[str, str] = {"px4": "px4-sih", "ardupilot": "arducopter"}
+DEMO_CONFIGS: dict[str, str] = {"px4-sih": "px4-sih", "arducopter": "arducopter", "fast": "paper"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", help="config YAML file or shipped config name (default: paper)")
+    parser.add_argument("--config", help="config YAML file or shipped config name (default: the one made for --vehicle: "
+                        "px4-sih, arducopter, or paper for fast)")
+    parser.add_argument("--vehicle", choices=tuple(DEMO_CONFIGS),
+                        help="mock vehicle (default: the autopilot's realistic one, px4-sih for px4, arducopter for ardupilot; "
+                             "fast: the paper's ideal vehicle)")  # fmt: skip
     parser.add_argument("--laps", type=float, default=2.0, help="laps to fly (default 2)")
     parser.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: from the config)")
     parser.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4", help="mock profile (default px4)")
@@ -32,11 +45,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the flight report (LOG_DIR/summary.json) as JSON on stdout")
 
 
-def paper_config() -> Path:
-    """The shipped ``paper`` config (package data: found after ``pip install`` from any directory)."""
+def demo_vehicle(args: argparse.Namespace) -> str:
+    """The mock vehicle: ``--vehicle``, else the realistic preset of ``--autopilot``."""
+    return args.vehicle if getattr(args, "vehicle", None) else DEMO_VEHICLES[args.autopilot]
+
+
+def paper_config(vehicle: str = "fast") -> Path:
+    """The shipped config flying the paper's path on ``vehicle`` (package data: found after
+    ``pip install`` from any directory): ``paper`` for the ideal vehicle, else the vehicle's own."""
     from pf_offboard.shipped import resolve_config
 
-    return resolve_config("paper")
+    return resolve_config(DEMO_CONFIGS[vehicle])
 
 
 # The mock's default ("fast") vehicle: its closed body-rate loop reaches 63 % of a step within
@@ -74,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
 
     from pf_offboard.shipped import resolve_config
 
-    config_path = resolve_config(args.config) if args.config else paper_config()
+    vehicle = demo_vehicle(args)
+    config_path = resolve_config(args.config) if args.config else paper_config(vehicle)
     if not (args.laps > 0):
         raise InputError("--laps", f"must be > 0, got {args.laps}")
     stamped = default_log_dir()
@@ -88,7 +108,8 @@ def run(args: argparse.Namespace) -> int:
         from pf_offboard.app.fly import signing_key_from_args
 
         signing_key_from_args(args)  # an unreadable key file is bad input, found before the mock starts
-    config_path = _with_mock_rate_loop(config, config_path, args.output)
+    if vehicle == "fast":
+        config_path = _with_mock_rate_loop(config, config_path, args.output)
     rate_hz = config.flight.setpoint_rate_hz
     # PX4: lockstep (one physics step per setpoint: as fast as the host allows, deterministic).
     # ArduPilot takes off on its own (NAV_TAKEOFF) while we send nothing, which a lockstep clock
@@ -97,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
     start_ned = frames.enu_to_ned((START_ENU_M[0], START_ENU_M[1], 0.0))
     mock_config = MockConfig(
         profile=args.autopilot,
+        vehicle=vehicle,
         spawn=SpawnSpec("ground", (float(start_ned[0]), float(start_ned[1]), 0.0)),
         udp_local_port=0,
         udp_remote=None,
@@ -106,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
         signing_key_file=args.signing_key,
     )
     clock = f"lockstep {1000.0 / rate_hz:g} ms" if lockstep else "real time"
-    print(f"pf-offboard demo: sitl-mock ({args.autopilot}, {clock}) on loopback; "
+    print(f"pf-offboard demo: sitl-mock ({args.autopilot}, vehicle {vehicle}, {clock}) on loopback; "
           f"config {config_path}", file=sys.stderr)  # fmt: skip
     with spawn(mock_config) as mock:
         parser = argparse.ArgumentParser(prog="pf-offboard fly")

@@ -49,6 +49,9 @@ MAV_FRAME_LOCAL_NED = 1
 _HOLD_DAMPING_1_S = 1.0  # velocity damping of the acceleration-mode hold (1/s)
 _HOLD_ACCEL_MAX_M_S2 = 3.0
 _THRUST_PROJECTION_FLOOR = 0.3  # rates mode: keep >= 30 % of the demand while the tilt is still far off
+# tilt_from_gravity_setpoint: the vertical specific force (g + a_up) it divides by, at least g / 4
+# (a demand near free fall; the autopilot's tilt limit then bounds what is flown)
+_TILT_FROM_GRAVITY_FLOOR = 0.25
 
 
 class CommandLike(Protocol):
@@ -79,6 +82,30 @@ def thrust_normalised(thrust_m_s2: float, hover_thrust: float) -> float:
     """
     value = thrust_m_s2 / G_M_S2 * hover_thrust
     return float(min(1.0, max(0.0, value))) if math.isfinite(value) else math.nan
+
+
+def tilt_from_gravity_setpoint(accel_enu_m_s2: Any) -> tuple[float, float, float]:
+    """The acceleration setpoint (ENU, m/s², gravity excluded) to send to an autopilot that tilts
+    as if the vertical demand were zero (:attr:`Profile.accel_tilt_from_gravity`), so that it flies
+    ``accel_enu_m_s2``.
+
+    Such an autopilot tilts by atan(a_xy / g) and sets the collective for the vertical demand, so
+    it flies a_xy (g + a_up) / g horizontally; the horizontal part is scaled by g / (g + a_up). The
+    tilt it then commands is the one the whole demand needs, atan(a_xy / (g + a_up)), as in
+    ``attitude`` output. The vertical part is sent as it is.
+    """
+    ax, ay, az = (float(a) for a in accel_enu_m_s2)
+    scale = G_M_S2 / max(G_M_S2 + az, _TILT_FROM_GRAVITY_FLOOR * G_M_S2)
+    return ax * scale, ay * scale, az
+
+
+def flown_when_tilting_from_gravity(accel_sent_enu_m_s2: Any) -> tuple[float, float, float]:
+    """What an autopilot that tilts from g alone flies for an acceleration setpoint sent to it
+    (ENU, m/s², gravity excluded): the horizontal part times (g + a_up) / g, the autopilot's
+    collective at least ``g / 4`` (the inverse of :func:`tilt_from_gravity_setpoint`)."""
+    ax, ay, az = (float(a) for a in accel_sent_enu_m_s2)
+    scale = max(G_M_S2 + az, _TILT_FROM_GRAVITY_FLOOR * G_M_S2) / G_M_S2
+    return ax * scale, ay * scale, az
 
 
 def yaw_of(q_enu_flu: NDArray[np.float64]) -> float:
@@ -125,7 +152,9 @@ class Encoder:
     """Encode commands for one output mode and autopilot profile.
 
     ``hover_thrust`` is the autopilot's normalised hover thrust (0..1) used to scale the
-    thrust of attitude / rates setpoints. ``rate_law`` is the rates-mode attitude controller;
+    thrust of attitude / rates setpoints. ``tilt_from_gravity`` (default: the profile's
+    :attr:`~Profile.accel_tilt_from_gravity`) makes acceleration setpoints undo the autopilot's
+    tilt from g alone (:func:`tilt_from_gravity_setpoint`). ``rate_law`` is the rates-mode attitude controller;
     without it, ``AttitudeRateLaw(time_constant_s)`` (default bounds). Pure: same inputs, same
     message.
     """
@@ -140,6 +169,7 @@ class Encoder:
         time_constant_s: float = DEFAULT_ATTITUDE_TIME_CONSTANT_S,
         rate_law: AttitudeRateLaw | None = None,
         max_body_rate_rad_s: float | None = None,
+        tilt_from_gravity: bool | None = None,
     ) -> None:
         if output_mode not in ("acceleration", "attitude", "rates"):
             raise ValueError(f"unknown output mode {output_mode!r}")
@@ -159,13 +189,29 @@ class Encoder:
         if max_body_rate_rad_s is not None and not max_body_rate_rad_s > 0.0:
             raise ValueError(f"max_body_rate_rad_s must be positive, got {max_body_rate_rad_s}")
         self.max_body_rate_rad_s = max_body_rate_rad_s
+        self.tilt_from_gravity = profile.accel_tilt_from_gravity if tilt_from_gravity is None else bool(tilt_from_gravity)
 
     def with_hover_thrust(self, hover_thrust: float) -> Encoder:
         """The same encoder with the hover thrust read from the autopilot (validated like __init__)."""
         return Encoder(
             self.output_mode, self.profile, self.target_system, self.target_component,
             hover_thrust=hover_thrust, rate_law=self.rate_law, max_body_rate_rad_s=self.max_body_rate_rad_s,
+            tilt_from_gravity=self.tilt_from_gravity,
         )  # fmt: skip
+
+    def with_tilt_from_gravity(self, tilt_from_gravity: bool) -> Encoder:
+        """The same encoder with the autopilot's tilt mapping as read from it (``accel_tilt_param``)."""
+        return Encoder(
+            self.output_mode, self.profile, self.target_system, self.target_component,
+            hover_thrust=self.hover_thrust, rate_law=self.rate_law, max_body_rate_rad_s=self.max_body_rate_rad_s,
+            tilt_from_gravity=tilt_from_gravity,
+        )  # fmt: skip
+
+    def _accel_ned(self, accel_enu_m_s2: Any) -> NDArray[np.float64]:
+        """An acceleration setpoint as sent (NED): what the autopilot flies is ``accel_enu_m_s2``."""
+        if self.tilt_from_gravity:
+            return frames.enu_to_ned(tilt_from_gravity_setpoint(accel_enu_m_s2))
+        return frames.enu_to_ned(accel_enu_m_s2)
 
     # ------------------------------------------------------------------ path-following setpoints
     def encode(self, cmd: CommandLike, est: StateEstimate, time_boot_ms: int) -> Encoded:
@@ -186,7 +232,7 @@ class Encoder:
 
     def _encode(self, cmd: CommandLike, est: StateEstimate, time_boot_ms: int) -> Encoded:
         if self.output_mode == "acceleration":
-            accel_ned = frames.enu_to_ned(cmd.acceleration)
+            accel_ned = self._accel_ned(cmd.acceleration)
             if self.profile.accel_with_velocity:
                 # ArduPilot integrates an acceleration-only target into its own velocity and
                 # position targets and corrects towards them (Z always). Giving it the measured
@@ -258,7 +304,7 @@ class Encoder:
                 accel = np.zeros(3)
             elif norm > _HOLD_ACCEL_MAX_M_S2:
                 accel *= _HOLD_ACCEL_MAX_M_S2 / norm
-            accel_ned = frames.enu_to_ned(accel)
+            accel_ned = self._accel_ned(accel)
             msg = mavlink2.MAVLink_set_position_target_local_ned_message(
                 time_boot_ms, self.target_system, self.target_component, MAV_FRAME_LOCAL_NED,
                 TYPE_MASK_ACCEL_YAW_YAWRATE, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,

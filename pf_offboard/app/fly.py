@@ -361,11 +361,7 @@ async def _fly(
             for _ in range(2):  # twice more, not waited for: idempotent
                 for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
                     bridge.request_interval(msg_id, rate)
-            if settings.hover_thrust is None and settings.output_mode != "acceleration":
-                hover = await bridge.read_param(profile.hover_thrust_param)
-                if not 0.05 <= hover <= 0.95:
-                    raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
-                pipeline.encoder = pipeline.encoder.with_hover_thrust(float(hover))
+            await read_setpoint_mapping(bridge, profile, settings, pipeline, stream)
             if profile.autopilot is Autopilot.ARDUPILOT:
                 await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
                 if settings.output_mode == "acceleration":
@@ -429,6 +425,34 @@ def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[typ
     while isinstance(first, BaseExceptionGroup):
         first = first.exceptions[0]
     return first
+
+
+async def read_setpoint_mapping(bridge: Any, profile: Any, settings: FlightSettings, pipeline: Any, stream: TextIO) -> None:
+    """Read what the encoder needs to know of the autopilot's setpoint mapping and set it.
+
+    attitude / rates: the hover thrust (unless the config gives one); a value no vehicle hovers at
+    is a link error. acceleration: whether the autopilot tilts from g alone
+    (:attr:`Profile.accel_tilt_param`, PX4's MPC_ACC_DECOUPLE); without an answer the profile's
+    default (PX4's own default) is kept and a warning says so.
+    """
+    if settings.output_mode != "acceleration":
+        if settings.hover_thrust is None:
+            hover = await bridge.read_param(profile.hover_thrust_param)
+            if not 0.05 <= hover <= 0.95:
+                raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
+            pipeline.encoder = pipeline.encoder.with_hover_thrust(float(hover))
+        return
+    if profile.accel_tilt_param is None:
+        return
+    try:
+        value = await bridge.read_param(profile.accel_tilt_param)
+    except LinkError as exc:
+        default = "1 (tilt from g alone)" if profile.accel_tilt_from_gravity else "0"
+        print(f"pf-offboard: warning: {exc}; assuming {profile.accel_tilt_param} = {default}, the autopilot's default", file=stream)
+        return
+    if value not in (0.0, 1.0):
+        raise LinkError(f"{profile.accel_tilt_param} = {value:g} is neither 0 nor 1")
+    pipeline.encoder = pipeline.encoder.with_tilt_from_gravity(value == 1.0)
 
 
 async def _check_guid_options(bridge: Any, required: int, allow_set: bool, output_mode: str) -> None:

@@ -63,6 +63,14 @@ class Profile:
     attitude_rates_ff: tuple[bool, bool, bool]
     # acceleration output sent with the measured velocity as velocity target (ArduPilot: see encoders)
     accel_with_velocity: bool = False
+    # How the autopilot turns an acceleration setpoint into a tilt: from the horizontal demand
+    # against g alone, ignoring the vertical demand (PX4 with MPC_ACC_DECOUPLE = 1, its default;
+    # ArduPilot's accel_to_lean_angles always). Its collective still meets the vertical demand, so
+    # the horizontal acceleration flown is a_xy (g + a_up) / g: 15 % more or less on a path that
+    # climbs or sinks at 1.5 m/s² (the encoder divides it out, see encoders.tilt_from_gravity_setpoint).
+    accel_tilt_from_gravity: bool = True
+    # the parameter that says so (1: tilt from g alone; 0: from the whole demand), or None
+    accel_tilt_param: str | None = None
 
     @property
     def name(self) -> str:
@@ -111,6 +119,7 @@ PX4 = Profile(
     land_custom_mode=px4_custom_mode(4, 6),
     hover_thrust_param="MPC_THR_HOVER",
     attitude_rates_ff=(False, False, True),
+    accel_tilt_param="MPC_ACC_DECOUPLE",
 )
 
 ARDUPILOT = Profile(

@@ -81,7 +81,7 @@ def bench_sim(duration_s: float, out_dir: Path) -> dict[str, Any]:
     from pf_offboard.sim.flight import SimFlight
 
     samples = _Samples("sim")
-    flight = SimFlight(_config(), SimSpec(duration_s=duration_s, epoch_unix_s=1.7e9, name="memory"), out_dir)
+    flight = SimFlight(_config(), SimSpec(vehicle="fast", duration_s=duration_s, epoch_unix_s=1.7e9, name="memory"), out_dir)
     flight.progress = samples.add
     t0 = time.perf_counter()
     result = flight.run()
@@ -111,7 +111,7 @@ def bench_fly(duration_s: float, out_dir: Path) -> dict[str, Any]:
                 for m in mock_samples:
                     m.add(t)
 
-    mock_config = MockConfig(profile="px4", spawn=SpawnSpec.parse("hover:-3,0,-2"), udp_local_port=0, udp_remote=None,
+    mock_config = MockConfig(vehicle="fast", profile="px4", spawn=SpawnSpec.parse("hover:-3,0,-2"), udp_local_port=0, udp_remote=None,
                              lockstep=True, lockstep_dt_s=1.0 / rate_hz)  # fmt: skip
     parser = argparse.ArgumentParser()
     add_arguments(parser)

@@ -313,7 +313,11 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
     from pf_offboard.app.bridge import Bridge, BridgeOptions, EndSpec
     from pf_offboard.app.encoders import Encoder
     from pf_offboard.app.estimator import Estimator
-    from pf_offboard.app.fly import _check_guid_options, default_log_dir
+    from pf_offboard.app.fly import (
+        _check_guid_options,
+        default_log_dir,
+        read_setpoint_mapping,
+    )
     from pf_offboard.app.link import Link
     from pf_offboard.app.pipeline import Pipeline
     from pf_offboard.app.profiles import Autopilot, select_profile
@@ -382,11 +386,7 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
                 (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0),
             ):
                 bridge.request_interval(msg_id, rate)
-            if settings.hover_thrust is None and settings.output_mode != "acceleration":
-                hover = await bridge.read_param(profile.hover_thrust_param)
-                if not 0.05 <= hover <= 0.95:
-                    raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
-                pipeline.encoder = pipeline.encoder.with_hover_thrust(float(hover))
+            await read_setpoint_mapping(bridge, profile, settings, pipeline, stream)
             if profile.autopilot is Autopilot.ARDUPILOT:
                 await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard import frames
+from pf_offboard.app.encoders import flown_when_tilting_from_gravity
 from pf_offboard.control.types import GRAVITY_M_S2
 from pf_offboard.errors import InputError
 
@@ -121,6 +122,7 @@ class _Raw:
     sp_thrust: list[float]
     params: dict[str, float]
     autopilot: int | None
+    param_types: dict[str, int] = field(default_factory=dict)
 
 
 def _heartbeat_active(msg: Any) -> bool:
@@ -162,6 +164,7 @@ def _read_raw(path: Path) -> _Raw:
             elif kind == "PARAM_VALUE":
                 pid = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode(errors="replace")
                 raw.params[pid.rstrip("\x00")] = float(msg.param_value)
+                raw.param_types[pid.rstrip("\x00")] = int(msg.param_type)
             continue
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
             mask = msg.type_mask
@@ -329,6 +332,21 @@ def load_log(
     return LogData(name, kind, tuple(segments), hover, hover_src, slope)
 
 
+def _tilts_from_gravity(raw: _Raw) -> bool:
+    """Whether the logged autopilot tilted from g alone for acceleration setpoints: its
+    ``accel_tilt_param`` as logged, else the profile's default (PX4's and ArduPilot's: yes)."""
+    from pf_offboard.app.bridge import param_value_decode
+    from pf_offboard.app.profiles import ARDUPILOT, PX4
+
+    profile = PX4 if raw.autopilot == _MAV_AUTOPILOT_PX4 else ARDUPILOT
+    name = profile.accel_tilt_param
+    if name is not None and name in raw.params:
+        value = param_value_decode(raw.params[name], raw.param_types.get(name, 9), profile is PX4)
+        if value in (0.0, 1.0):
+            return value == 1.0
+    return profile.accel_tilt_from_gravity
+
+
 def _setpoint_accel(
     raw: _Raw, kind: str, hover: float | None, sp_idx: NDArray[np.int64], grid: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.float64] | None]:
@@ -338,6 +356,10 @@ def _setpoint_accel(
     if kind == "acceleration":
         a_ned = np.asarray(raw.sp_accel_ned, dtype=float)
         per_sp = np.array([frames.ned_to_enu(a) if np.all(np.isfinite(a)) else (math.nan,) * 3 for a in a_ned])
+        if _tilts_from_gravity(raw):
+            # what the autopilot flies for the setpoint sent (a_xy scaled by (g + a_up) / g), whether
+            # or not the app had divided that out: the fit sees the acceleration asked of the vehicle
+            per_sp = np.array([flown_when_tilting_from_gravity(a) for a in per_sp])
         return per_sp[sp_idx], None, None
     assert hover is not None
     thrust = np.asarray(raw.sp_thrust, dtype=float) / hover * THRUST_NORM_G_M_S2  # m/s^2

@@ -175,6 +175,9 @@ class ReplayOptions:
     output_mode: str | None = None  # default: config flight.output_mode
     state_source: str | None = None  # local_position | odometry; default: what the flight asked for
     hover_thrust: float | None = None  # default: config, else the PARAM_VALUE in the log
+    # acceleration setpoints encoded for an autopilot tilting from g alone (Profile.accel_tilt_from_gravity);
+    # default: the logged PARAM_VALUE, else the profile's default
+    tilt_from_gravity: bool | None = None
     tolerance: float = DEFAULT_TOLERANCE
 
 
@@ -209,15 +212,33 @@ def _state_source_of(entries: Sequence[TlogEntry]) -> str:
     return "local_position"
 
 
-def _hover_from_log(entries: Sequence[TlogEntry], param: str) -> float | None:
+def _param_from_log(entries: Sequence[TlogEntry], param: str, bytewise: bool) -> float | None:
+    """The last value the vehicle reported for ``param`` (PARAM_VALUE), or None."""
+    from pf_offboard.app.bridge import param_value_decode
+
     value = None
     for e in entries:
         if e.direction == "in" and e.message.get_type() == "PARAM_VALUE":
             pid = e.message.param_id
             pid = pid.decode(errors="replace") if isinstance(pid, bytes) else pid
             if pid.rstrip("\x00") == param:
-                value = float(e.message.param_value)
+                value = float(param_value_decode(e.message.param_value, e.message.param_type, bytewise))
     return value
+
+
+def _tilt_from_gravity(entries: Sequence[TlogEntry], profile: Any, options: ReplayOptions) -> bool:
+    """How the flight's acceleration setpoints were encoded: ``--tilt-from-gravity`` if given, else
+    the autopilot's reported ``accel_tilt_param`` as fly read it, else the profile's default (as fly
+    assumes without an answer)."""
+    from pf_offboard.app.profiles import Autopilot
+
+    if options.tilt_from_gravity is not None:
+        return options.tilt_from_gravity
+    if profile.accel_tilt_param is not None:
+        value = _param_from_log(entries, profile.accel_tilt_param, profile.autopilot is Autopilot.PX4)
+        if value in (0.0, 1.0):
+            return value == 1.0
+    return bool(profile.accel_tilt_from_gravity)
 
 
 def build_pipeline(
@@ -232,7 +253,7 @@ def build_pipeline(
     from pf_offboard.app.estimator import Estimator
     from pf_offboard.app.fly import flight_settings
     from pf_offboard.app.pipeline import Pipeline
-    from pf_offboard.app.profiles import select_profile
+    from pf_offboard.app.profiles import Autopilot, select_profile
     from pf_offboard.control import controller_from_config
 
     first = _first_step_setpoint(entries, records)
@@ -251,9 +272,10 @@ def build_pipeline(
     flown_mode = _output_mode_of(first)
     if options.output_mode is None and flown_mode != output_mode:
         output_mode = flown_mode  # the flight overrode the config with --output
+    bytewise = profile.autopilot is Autopilot.PX4
     hover = options.hover_thrust if options.hover_thrust is not None else settings.hover_thrust
     if hover is None:
-        hover = _hover_from_log(entries, profile.hover_thrust_param)
+        hover = _param_from_log(entries, profile.hover_thrust_param, bytewise)
     if hover is None and output_mode != "acceleration":
         raise InputError("--hover-thrust", f"the log has no {profile.hover_thrust_param} value and the config none; pass --hover-thrust")
     if hover is not None and not (math.isfinite(hover) and 0.0 < hover < 1.0):
@@ -263,6 +285,7 @@ def build_pipeline(
         hover_thrust=float(hover) if hover is not None else 0.5,
         time_constant_s=settings.attitude_time_constant_s,
         max_body_rate_rad_s=config.safety.max_body_rate_rad_s if config.safety.enabled else None,  # as fly bounds them
+        tilt_from_gravity=_tilt_from_gravity(entries, profile, options),
     )  # fmt: skip
     if follower is None:
         follower = controller_from_config(config)
@@ -346,6 +369,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--state-source", choices=("local_position", "odometry"),
                         help="state telemetry the flight followed (default: the stream it requested)")  # fmt: skip
     parser.add_argument("--hover-thrust", type=float, help="normalised hover thrust (default: config, else logged parameter)")
+    parser.add_argument("--tilt-from-gravity", choices=("yes", "no"),
+                        help="acceleration output: were setpoints encoded for an autopilot that tilts from g alone (PX4 MPC_ACC_DECOUPLE 1)? "
+                             "default: the logged parameter, else the autopilot's default (yes); 'no' for flights of pf-offboard before 2026-11-24")  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print the report and flight summary as JSON")
 
 
@@ -371,6 +397,7 @@ def run(args: argparse.Namespace) -> int:
         output_mode=args.output,
         state_source=args.state_source,
         hover_thrust=args.hover_thrust,
+        tilt_from_gravity=None if args.tilt_from_gravity is None else args.tilt_from_gravity == "yes",
         tolerance=args.tolerance,
     )
     report = replay_flight(args.log, config, args.steps, options)

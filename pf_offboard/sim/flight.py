@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from sitl_mock.dynamics.params import DEFAULT_VEHICLE
 
 from pf_offboard import frames
 from pf_offboard.errors import InputError
@@ -62,7 +63,7 @@ class SimSpec:
     # engage this long after the release instead of at the activation height (0: at once)
     throw_engage_after_s: float | None = None
     autopilot: str = "px4"  # px4 | ardupilot (the mock's profile)
-    vehicle: str = "fast"  # a sitl_mock.dynamics preset (PRESET_NAMES); the CLI defaults to DEFAULT_VEHICLE
+    vehicle: str = DEFAULT_VEHICLE  # a sitl_mock.dynamics preset (PRESET_NAMES): the realistic px4-sih by default
     wind_enu_m_s: tuple[float, float, float] | None = None  # constant wind, world ENU m/s (air velocity)
     wind_gusts: tuple[float, float] | None = None  # random gusts: (std m/s per axis, time constant s)
     # an external push: (start s of simulated time, duration s, ax, ay, az m/s^2 world ENU), a
@@ -427,8 +428,12 @@ class SimFlight:
         for msgid in _STATE_STREAMS:
             self._command(log, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msgid, self.dt_s * 1e6)
         self._command(log, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_HEARTBEAT, 1e6 / _HEARTBEAT_HZ)
-        param = self.profile.hover_thrust_param.encode()
-        self._send(log, mavlink.MAVLink_param_request_read_message(AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, param, -1))
+        # as fly (read_setpoint_mapping): the hover thrust, and the acceleration mapping's tilt
+        params = [self.profile.hover_thrust_param]
+        if self.settings.output_mode == "acceleration" and self.profile.accel_tilt_param is not None:
+            params.append(self.profile.accel_tilt_param)
+        for param in params:
+            self._send(log, mavlink.MAVLink_param_request_read_message(AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, param.encode(), -1))
         required = self.profile.required_guid_options(self.settings.output_mode)
         if required:  # like `fly --set-guid-options`
             self._send(log, mavlink.MAVLink_param_set_message(
@@ -441,9 +446,12 @@ class SimFlight:
             from pf_offboard.app.bridge import param_value_decode
 
             pid = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
-            if pid.rstrip("\x00") == self.profile.hover_thrust_param and self.settings.hover_thrust is None:
-                value = param_value_decode(msg.param_value, msg.param_type, self.profile.name == "px4")
+            pid = pid.rstrip("\x00")
+            value = param_value_decode(msg.param_value, msg.param_type, self.profile.name == "px4")
+            if pid == self.profile.hover_thrust_param and self.settings.hover_thrust is None:
                 self.pipeline.encoder = self.pipeline.encoder.with_hover_thrust(float(value))
+            elif pid == self.profile.accel_tilt_param and self.settings.output_mode == "acceleration" and value in (0.0, 1.0):
+                self.pipeline.encoder = self.pipeline.encoder.with_tilt_from_gravity(value == 1.0)
             return
         if kind == "COMMAND_ACK":
             if msg.command == mavlink.MAV_CMD_DO_SET_MODE and self._mode_requested and self.phase == "engaging":

@@ -8,10 +8,13 @@ import pytest
 from pf_offboard import frames
 from pf_offboard.app.encoders import (
     ATTITUDE_IGNORE,
+    G_M_S2,
     TYPE_MASK_ACCEL_YAW_YAWRATE,
     Encoder,
     attitude_rate_command,
+    flown_when_tilting_from_gravity,
     thrust_normalised,
+    tilt_from_gravity_setpoint,
 )
 from pf_offboard.app.estimator import StateEstimate
 from pf_offboard.app.profiles import ARDUPILOT, PX4
@@ -24,7 +27,7 @@ def estimate(q=(1.0, 0.0, 0.0, 0.0), velocity=(0.0, 0.0, 0.0)) -> StateEstimate:
 
 
 def test_acceleration_setpoint_is_ned_with_yaw() -> None:
-    enc = Encoder("acceleration", PX4, 1, 1)
+    enc = Encoder("acceleration", PX4, 1, 1, tilt_from_gravity=False)  # sent as computed
     out = enc.encode(command(), estimate(), 12500)
     m = out.message
     assert m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
@@ -109,7 +112,7 @@ def test_nan_never_goes_out(mode: str, field: str) -> None:
 
 def test_hold_setpoints() -> None:
     est = estimate(q=quat_about((0, 0, 1), 0.5), velocity=(2.0, 0.0, -10.0))
-    acc = Encoder("acceleration", PX4, 1, 1).hold(est, 0).message
+    acc = Encoder("acceleration", PX4, 1, 1, tilt_from_gravity=False).hold(est, 0).message
     a_enu = frames.ned_to_enu([acc.afx, acc.afy, acc.afz])
     assert np.linalg.norm(a_enu) == pytest.approx(3.0)  # damping, clipped to 3 m/s^2
     assert np.dot(a_enu, [2.0, 0.0, -10.0]) < 0  # opposes the motion
@@ -123,7 +126,8 @@ def test_ardupilot_acceleration_carries_the_measured_velocity() -> None:
     m = out.message
     assert m.type_mask == 0x007  # velocity + acceleration + yaw + yaw rate
     assert (m.vx, m.vy, m.vz) == pytest.approx((2.0, 1.0, 0.5))  # ENU -> NED
-    assert (m.afx, m.afy, m.afz) == pytest.approx((-0.25, 0.5, -0.1))
+    k = G_M_S2 / (G_M_S2 + 0.1)  # ArduPilot tilts from g alone too (accel_to_lean_angles)
+    assert (m.afx, m.afy, m.afz) == pytest.approx((-0.25 * k, 0.5 * k, -0.1))
 
 
 def test_with_hover_thrust_keeps_everything_else_and_validates() -> None:
@@ -136,3 +140,60 @@ def test_with_hover_thrust_keeps_everything_else_and_validates() -> None:
     assert new.encode(cmd, estimate(), 0).message.thrust == pytest.approx(0.37, rel=1e-6)
     with pytest.raises(ValueError, match="hover_thrust"):
         enc.with_hover_thrust(1.5)
+
+
+def _px4_flies(accel_sent_enu) -> np.ndarray:
+    """What the mock's PX4 acceleration mapping (PositionControl::_accelerationControl with
+    MPC_ACC_DECOUPLE 1, the mock's code) makes the vehicle accelerate at, ENU, gravity excluded."""
+    from sitl_mock.dynamics import Simulator, preset
+
+    params = preset("px4-sih")
+    params = params.with_(hover_thrust=params.true_hover_thrust)  # the autopilot knows its hover thrust
+    sim = Simulator(params, np.random.default_rng(0))
+    assert sim._accel_decouple
+    q_ned_frd, thrust = sim._accel_to_attitude(tuple(frames.enu_to_ned(accel_sent_enu)), 0.0)
+    w, x, y, z = q_ned_frd
+    body_z_ned = np.array([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)])
+    specific_force_ned = -thrust / params.true_hover_thrust * 9.80665 * body_z_ned
+    return frames.ned_to_enu(specific_force_ned + np.array([0.0, 0.0, 9.80665]))
+
+
+@pytest.mark.parametrize("accel_enu", [(1.5, -0.8, 1.5), (1.5, -0.8, -1.5), (-2.0, 0.5, 0.0), (0.3, 2.5, 3.0)])
+def test_acceleration_setpoint_undoes_the_autopilots_tilt_from_gravity(accel_enu) -> None:
+    """PX4 (MPC_ACC_DECOUPLE 1) tilts as if the vertical demand were zero: sent as computed, a
+    climb's horizontal acceleration comes out (g + a_up) / g too large, a sink's too small. The
+    encoder divides that out: what PX4's mapping flies is the acceleration the law asked for."""
+    enc = Encoder("acceleration", PX4, 1, 1)
+    assert enc.tilt_from_gravity and PX4.accel_tilt_from_gravity and ARDUPILOT.accel_tilt_from_gravity
+    m = enc.encode(command(acceleration=accel_enu), estimate(), 0).message
+    sent = frames.ned_to_enu([m.afx, m.afy, m.afz])
+    assert _px4_flies(sent) == pytest.approx(accel_enu, abs=2e-3)  # g 9.81 against PX4's 9.80665
+    naive = _px4_flies(accel_enu)
+    if accel_enu[2] != 0.0:  # sent as computed, the horizontal part is off by a_up / g
+        assert abs(naive[0] - accel_enu[0]) > 0.1 * abs(accel_enu[0]) * abs(accel_enu[2]) / 1.5
+    assert sent[2] == pytest.approx(accel_enu[2])  # the vertical demand is sent as it is
+
+
+def test_tilt_from_gravity_setpoint_and_its_inverse() -> None:
+    for a in [(1.0, -2.0, 0.0), (1.0, -2.0, 2.5), (0.4, 0.1, -3.0)]:
+        sent = tilt_from_gravity_setpoint(a)
+        assert sent[:2] == pytest.approx(np.array(a[:2]) * G_M_S2 / (G_M_S2 + a[2]))
+        assert flown_when_tilting_from_gravity(sent) == pytest.approx(a)
+    # near free fall the divisor stops at g / 4: at most 4 x, the autopilot's tilt limit does the rest
+    assert tilt_from_gravity_setpoint((1.0, 0.0, -9.0))[0] == pytest.approx(4.0)
+    assert tilt_from_gravity_setpoint((1.0, 0.0, -50.0))[0] == pytest.approx(4.0)
+
+
+def test_tilt_from_the_whole_demand_is_sent_as_computed_and_the_flag_survives_copies() -> None:
+    """MPC_ACC_DECOUPLE 0 (read by fly): the autopilot tilts for the whole demand, nothing to undo."""
+    enc = Encoder("acceleration", PX4, 1, 1).with_tilt_from_gravity(False)
+    m = enc.encode(command(acceleration=(1.0, 2.0, 1.5)), estimate(), 0).message
+    assert frames.ned_to_enu([m.afx, m.afy, m.afz]) == pytest.approx((1.0, 2.0, 1.5))
+    assert not enc.with_hover_thrust(0.4).tilt_from_gravity  # hover thrust read later keeps it
+    assert Encoder("rates", PX4, 1, 1).with_tilt_from_gravity(True).output_mode == "rates"
+    # the hold in acceleration output is encoded the same way
+    est = estimate(velocity=(1.0, 0.0, -1.0))  # sinking: the hold asks for +1 m/s^2 up
+    hold = Encoder("acceleration", PX4, 1, 1).hold(est, 0).message
+    a = frames.ned_to_enu([hold.afx, hold.afy, hold.afz])
+    assert a[2] == pytest.approx(1.0)  # -1/s x velocity, below the 3 m/s^2 clip
+    assert a[0] == pytest.approx(-1.0 * G_M_S2 / (G_M_S2 + 1.0))

@@ -19,7 +19,7 @@ HOVER_NED = (-3.0, 0.0, -2.0)
 
 
 def mock_config(profile: str, spawn_spec: str, **kw: object) -> MockConfig:
-    return MockConfig(profile=profile, spawn=SpawnSpec.parse(spawn_spec), udp_local_port=0, udp_remote=None,
+    return MockConfig(vehicle="fast", profile=profile, spawn=SpawnSpec.parse(spawn_spec), udp_local_port=0, udp_remote=None,
                       lockstep=True, lockstep_dt_s=1.0 / RATE_HZ, **kw)  # fmt: skip
 
 
@@ -249,7 +249,7 @@ def test_real_time_clock_keeps_up_at_250_hz(tmp_path) -> None:
     rates-mode convergence) does not depend on the load. The wall-clock claim at full speed (250 Hz
     answered, latency) is a benchmark figure: `pf-offboard bench --only latency` (answered_fraction)."""
     config = write_config(tmp_path)
-    cfg = MockConfig(profile="px4", spawn=SpawnSpec.parse("hover:" + ",".join(map(str, HOVER_NED))), udp_local_port=0,
+    cfg = MockConfig(vehicle="fast", profile="px4", spawn=SpawnSpec.parse("hover:" + ",".join(map(str, HOVER_NED))), udp_local_port=0,
                      udp_remote=None, speed=0.5)  # fmt: skip
     with spawn(cfg) as mock:
         outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--output", "rates", "--duration", "3")
@@ -316,14 +316,21 @@ def test_end_action_land_hands_back_in_land_mode(tmp_path) -> None:
 
 
 
+def _fly_with_params(tmp_path, log_name: str, output: str, duration_s: float, prepare) -> tuple:
+    """Fly ``--airborne`` on a PX4 mock whose parameters ``prepare(params dict)`` edited first;
+    (outcome, the mock's mode at the end)."""
+    config = write_config(tmp_path)
+    with run_in_thread(mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)))) as mock:
+        mock.call(lambda m: prepare(m.autopilot.params))
+        outcome = run_fly(mock.ports.udp, config, tmp_path / log_name, "--airborne", "--output", output, "--duration", str(duration_s))
+        return outcome, mock.call(lambda m: m.autopilot.mode.name)
+
+
 def test_implausible_hover_thrust_parameter_is_refused(tmp_path) -> None:
     """attitude / rates normalise thrust with the autopilot's MPC_THR_HOVER: a value outside
     [0.05, 0.95] is a link error (exit 3) before any mode change, never a misread thrust."""
-    config = write_config(tmp_path)
-    with run_in_thread(mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)))) as mock:
-        mock.call(lambda m: m.autopilot.params.update(MPC_THR_HOVER=0.99))
-        outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--output", "attitude", "--duration", "2")
-        assert mock.call(lambda m: m.autopilot.mode.name) != "OFFBOARD"
+    outcome, mode = _fly_with_params(tmp_path, "log", "attitude", 2, lambda params: params.update(MPC_THR_HOVER=0.99))
+    assert mode != "OFFBOARD"
     assert outcome.exit_code == 3
     assert "MPC_THR_HOVER = 0.99 is not a plausible hover thrust" in outcome.reason
     out = [e.message for e in read_tlog(tmp_path / "log" / "flight.tlog") if e.direction == "out"]
@@ -349,3 +356,55 @@ def test_corrupt_and_duplicated_telemetry_is_ignored_safely(tmp_path) -> None:
     recs = [r for r in outcome.records if r.active and r.time_s >= outcome.records[-1].time_s - 2.0]
     print(f"\nfaults: {len(states) - len(set(states))} duplicate samples; last 2 s cross-track max {max(r.cross_track_m for r in recs) * 1000:.2f} mm")
     assert max(r.cross_track_m for r in recs) < 0.01
+
+
+def _sent_and_computed(log_dir) -> tuple[np.ndarray, np.ndarray]:
+    """(acceleration setpoints sent, the controller's acceleration) ENU per following step."""
+    from pf_offboard import frames
+    from pf_offboard.logs.steplog import read_steplog
+
+    steps = {round(r.time_s * 1000): r for r in read_steplog(log_dir / "flight.csv") if r.mode == "following"}
+    sent, computed = [], []
+    for e in read_tlog(log_dir / "flight.tlog"):
+        m = e.message
+        if e.direction == "out" and m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.time_boot_ms in steps:
+            sent.append(frames.ned_to_enu([m.afx, m.afy, m.afz]))
+            computed.append(steps[m.time_boot_ms].accel_cmd_enu_m_s2)
+    assert len(sent) > 50
+    return np.array(sent), np.array(computed)
+
+
+@pytest.mark.parametrize(("decouple", "scaled"), [(1, True), (0, False)])
+def test_acceleration_output_reads_how_px4_tilts(tmp_path, decouple: int, scaled: bool) -> None:
+    """fly reads MPC_ACC_DECOUPLE: at 1 (PX4's default) the horizontal setpoints carry g / (g + a_up)
+    so that PX4's tilt from g alone flies the law's acceleration; at 0 they go out as computed."""
+    from pf_offboard.app.encoders import tilt_from_gravity_setpoint
+
+    outcome, _ = _fly_with_params(tmp_path, "log", "acceleration", 3, lambda params: params.update(MPC_ACC_DECOUPLE=float(decouple)))
+    assert outcome.exit_code == 0, outcome.reason
+    out = [e.message for e in read_tlog(tmp_path / "log" / "flight.tlog") if e.direction == "out"]
+    assert any(m.get_type() == "PARAM_REQUEST_READ" and m.param_id == "MPC_ACC_DECOUPLE" for m in out)
+    sent, computed = _sent_and_computed(tmp_path / "log")
+    expected = np.array([tilt_from_gravity_setpoint(a) for a in computed]) if scaled else computed
+    assert np.allclose(sent, expected, atol=1e-5)
+    assert np.max(np.abs(computed[:, 2])) > 0.3  # the approach climbs / sinks: the scaling was exercised
+    if scaled:
+        assert not np.allclose(sent, computed, atol=1e-3)
+
+
+def test_acceleration_output_without_an_answer_assumes_px4s_default(tmp_path, capsys) -> None:
+    """An autopilot that does not answer for MPC_ACC_DECOUPLE (an older PX4): a warning says what
+    is assumed (PX4's default, 1) and the flight goes on; a value that is neither 0 nor 1 is a
+    link error (exit 3) before any mode change."""
+    from pf_offboard.app.encoders import tilt_from_gravity_setpoint
+
+    outcome, _ = _fly_with_params(tmp_path, "log", "acceleration", 2, lambda params: params.pop("MPC_ACC_DECOUPLE"))
+    assert outcome.exit_code == 0, outcome.reason
+    err = capsys.readouterr().err
+    assert "warning: parameter MPC_ACC_DECOUPLE: no PARAM_VALUE" in err and "assuming MPC_ACC_DECOUPLE = 1" in err, err
+    sent, computed = _sent_and_computed(tmp_path / "log")
+    assert np.allclose(sent, [tilt_from_gravity_setpoint(a) for a in computed], atol=1e-5)
+    outcome, mode = _fly_with_params(tmp_path, "log2", "acceleration", 2, lambda params: params.update(MPC_ACC_DECOUPLE=2.0))
+    assert mode != "OFFBOARD"
+    assert outcome.exit_code == 3
+    assert "MPC_ACC_DECOUPLE = 2 is neither 0 nor 1" in outcome.reason

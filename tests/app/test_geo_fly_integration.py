@@ -48,7 +48,7 @@ def geo_config(tmp: Path, sample: str = "mission.plan", safety: dict | None = No
 
 def mock(home: tuple[float, float, float] | None) -> MockConfig:
     extra = {} if home is None else {"home_lat_deg": home[0], "home_lon_deg": home[1], "home_alt_m": home[2]}
-    return MockConfig(profile="px4", spawn=SpawnSpec("hover", HOVER_NED), udp_local_port=0, udp_remote=None,
+    return MockConfig(vehicle="fast", profile="px4", spawn=SpawnSpec("hover", HOVER_NED), udp_local_port=0, udp_remote=None,
                       lockstep=True, lockstep_dt_s=1.0 / RATE_HZ, **extra)  # fmt: skip
 
 

@@ -99,7 +99,7 @@ def test_ardupilot_takeoff_waits_for_the_position_estimate(tmp_path) -> None:
     EKF has an origin. The mock at 4x real time with a 60 s EKF delay (its clock runs from its own
     start, so the app waits ~10 s of wall clock, beyond the old 3-5 s limit): --takeoff waits
     (progress lines), arms, takes off and follows; exit 0."""
-    cfg = MockConfig(profile="ardupilot", spawn=SpawnSpec.parse("ground"), udp_local_port=0, udp_remote=None,
+    cfg = MockConfig(vehicle="fast", profile="ardupilot", spawn=SpawnSpec.parse("ground"), udp_local_port=0, udp_remote=None,
                      speed=4.0, ekf_ready_delay_s=30.0)  # fmt: skip
     config = write_config(tmp_path, setpoint_rate_hz=50.0)
     status = io.StringIO()
@@ -123,7 +123,7 @@ def test_ardupilot_takeoff_waits_for_the_position_estimate(tmp_path) -> None:
 def test_heartbeat_interval_refusal_is_one_note_line(tmp_path) -> None:
     """PX4 refuses SET_MESSAGE_INTERVAL for HEARTBEAT (COMMAND_ACK FAILED): one note line, even
     with --quiet, not an error; the flight goes on."""
-    cfg = MockConfig(profile="px4", spawn=SpawnSpec.parse("hover:-3,0,-2"), udp_local_port=0, udp_remote=None,
+    cfg = MockConfig(vehicle="fast", profile="px4", spawn=SpawnSpec.parse("hover:-3,0,-2"), udp_local_port=0, udp_remote=None,
                      lockstep=True, lockstep_dt_s=0.004)  # fmt: skip
     config = write_config(tmp_path)
     status = io.StringIO()
@@ -155,7 +155,7 @@ def test_px4_takeoff_retries_arming_until_the_checks_pass(tmp_path) -> None:
     """PX4 refuses arming (TEMPORARILY_REJECTED, "no position estimate") until its estimator is
     ready: --takeoff keeps retrying with progress lines instead of giving up after 5 s, then
     arms, climbs and follows. The mock at 4x real time, estimate ready at 30 s of vehicle time (7.5 s of wall time)."""
-    cfg = MockConfig(profile="px4", spawn=SpawnSpec.parse("ground"), udp_local_port=0, udp_remote=None,
+    cfg = MockConfig(vehicle="fast", profile="px4", spawn=SpawnSpec.parse("ground"), udp_local_port=0, udp_remote=None,
                      speed=4.0, ekf_ready_delay_s=30.0)  # fmt: skip
     config = write_config(tmp_path, setpoint_rate_hz=50.0)
     status = io.StringIO()

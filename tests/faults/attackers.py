@@ -25,7 +25,7 @@ POSCTL_PX4 = 3 << 16
 
 def mock_config(app_port: int, profile: str = "px4", spawn: str = "hover:" + ",".join(map(str, HOVER_NED)), **kw: object) -> MockConfig:
     """Lockstep mock whose UDP link sends to the app's ``udpin`` port (and answers its peers)."""
-    return MockConfig(profile=profile, spawn=SpawnSpec.parse(spawn), udp_local_port=0, udp_remote=("127.0.0.1", app_port),
+    return MockConfig(vehicle="fast", profile=profile, spawn=SpawnSpec.parse(spawn), udp_local_port=0, udp_remote=("127.0.0.1", app_port),
                       lockstep=True, lockstep_dt_s=1.0 / RATE_HZ, **kw)  # fmt: skip
 
 

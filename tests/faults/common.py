@@ -39,7 +39,7 @@ def write_config(tmp: Path, safety: dict | None = None, rate_hz: float = RATE_HZ
 
 
 def lockstep(profile: str, spawn: str, **faults: object) -> MockConfig:
-    return MockConfig(profile=profile, spawn=SpawnSpec.parse(spawn), udp_local_port=0, udp_remote=None,
+    return MockConfig(vehicle="fast", profile=profile, spawn=SpawnSpec.parse(spawn), udp_local_port=0, udp_remote=None,
                       lockstep=True, lockstep_dt_s=1.0 / RATE_HZ, faults=FaultConfig(**faults))  # fmt: skip
 
 
@@ -49,7 +49,7 @@ def own_clock(profile: str, spawn: str, truth_log: Path, speed: float = 0.5, **f
     speed by default: on a loaded CI machine the app's wall-clock latency then costs half as much
     vehicle time, so the flight itself does not depend on the load (the app's wall-clock timeouts
     are then twice as short in vehicle time, which only makes the fault shorter for the old code)."""
-    return MockConfig(profile=profile, spawn=SpawnSpec.parse(spawn), udp_local_port=0, udp_remote=None,
+    return MockConfig(vehicle="fast", profile=profile, spawn=SpawnSpec.parse(spawn), udp_local_port=0, udp_remote=None,
                       speed=speed, truth_log=str(truth_log), faults=FaultConfig(**faults))  # fmt: skip
 
 

@@ -16,6 +16,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from pf_offboard import frames
+from pf_offboard.app.encoders import flown_when_tilting_from_gravity
 from pf_offboard.logs.tlog import TlogWriter
 
 EPOCH_UNIX_S = 1.7e9
@@ -44,9 +45,14 @@ def write_tlog(
     seed: int = 0,
     setpoints: bool = True,
     offboard_from_s: float = 0.0,
+    tilt_from_gravity: bool = False,
 ) -> Path:
     """Write the log; the setpoint is random steps (dwell 0.2-0.8 s) of ``amplitude_m_s2`` with
-    a soft velocity damping so the vehicle stays put."""
+    a soft velocity damping so the vehicle stays put.
+
+    ``tilt_from_gravity``: the autopilot tilts from g alone (PX4's default mapping), so the vehicle
+    answers ``a_xy (g + a_up) / g`` and the log says nothing of it; else it flies the setpoint as
+    sent and the log holds its PARAM_VALUE MPC_ACC_DECOUPLE = 0 (as fly reads it)."""
     rng = np.random.default_rng(seed)
     ap = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     app = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
@@ -68,6 +74,8 @@ def write_tlog(
             log.write(msg.pack(mav), EPOCH_UNIX_S + clock_rate * t_boot)
             mav.seq = (mav.seq + 1) % 256
 
+        if not tilt_from_gravity:
+            send(ap, mavlink.MAVLink_param_value_message(b"MPC_ACC_DECOUPLE", 0.0, mavlink.MAV_PARAM_TYPE_INT32, 1, 0), 0.0)
         for k in range(n):
             t = k * dt
             if k % int(round(rate_hz / 10)) == 0:  # 10 Hz heartbeat
@@ -85,8 +93,9 @@ def write_tlog(
                 msg = mavlink.MAVLink_set_position_target_local_ned_message(
                     int(round(t * 1000)), 1, 1, 1, 0x03F, 0, 0, 0, 0, 0, 0, *map(float, a_ned), 0.0, 0.0)  # fmt: skip
                 send(app, msg, t)
+            asked = np.array(flown_when_tilting_from_gravity(a_sp)) if tilt_from_gravity else a_sp
             for _ in range(int(round(dt * 1000))):
-                history.append(a_sp.copy())
+                history.append(asked.copy())
                 delayed = history[-1 - delay_steps]
                 history = history[-(delay_steps + 2):]
                 alpha = np.where(lag > 0, 1.0 - np.exp(-1e-3 / np.maximum(lag, 1e-9)), 1.0)

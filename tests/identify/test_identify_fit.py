@@ -128,3 +128,29 @@ def test_written_section_replaces_a_kept_vertical_delay_with_null() -> None:
     assert section["accel_delay_z_s"] is None and section["accel_lag_z_s"] == 0.0
     assert section["rate_time_constant_s"] == 0.05
     assert VehicleModel(**section).accel_delay_z_s is None
+
+
+def test_an_autopilot_tilting_from_gravity_is_fitted_through_its_mapping(tmp_path) -> None:
+    """PX4 (MPC_ACC_DECOUPLE 1, its default) flies a_xy (g + a_up) / g for a setpoint a: identify
+    fits the vehicle to that, not to the setpoint as sent; read as sent, the same log fits worse."""
+    truth = Truth()
+    path = write_tlog(tmp_path / "flight.tlog", truth, amplitude_m_s2=3.0, tilt_from_gravity=True)
+    xy = identify(load_log(path).segments).xy
+    assert xy.gain == pytest.approx(truth.gain_xy, rel=0.02)
+    assert xy.lag_s == pytest.approx(truth.lag_xy_s, abs=0.005)
+    assert xy.r2 > 0.999
+    # the same log with the autopilot saying it flies the whole demand (MPC_ACC_DECOUPLE 0)
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    from pf_offboard.logs.tlog import TlogWriter, read_tlog
+
+    misread = tmp_path / "misread.tlog"
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    entries = read_tlog(path)
+    with TlogWriter.open(misread) as out:
+        param = mavlink.MAVLink_param_value_message(b"MPC_ACC_DECOUPLE", 0.0, mavlink.MAV_PARAM_TYPE_INT32, 1, 0)
+        out.write(param.pack(mav), entries[0].time_unix_s)
+        for e in entries:
+            out.write(e.message.get_msgbuf(), e.time_unix_s)
+    wrong = identify(load_log(misread).segments).xy
+    assert 1.0 - wrong.r2 > 5.0 * (1.0 - xy.r2)

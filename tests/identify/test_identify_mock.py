@@ -87,8 +87,7 @@ def test_wrong_hover_thrust_parameter_is_recovered_as_gain(tmp_path, truth) -> N
     def prepare(flight) -> None:
         ap = flight.autopilot
         new = ap.sim.params.with_(hover_thrust=wrong)
-        ap.sim.params = new  # what the mock's PARAM_SET of MPC_THR_HOVER does, plus re-deriving the
-        ap.sim._init_constants(new)  # simulator's cached mapping constants (PARAM_SET alone leaves them)
+        ap.sim.params = new  # what the mock's PARAM_SET of MPC_THR_HOVER does (the setter re-derives the mapping)
         ap.params[ap.profile.hover_param] = wrong
 
     ident = identify(load_log(_log(tmp_path, 100.0, prepare)).segments)
@@ -97,10 +96,12 @@ def test_wrong_hover_thrust_parameter_is_recovered_as_gain(tmp_path, truth) -> N
           f"drag xy {ident.xy.drag_1_s:.3f}, z {ident.z.drag_1_s:.3f}")  # fmt: skip
     assert ident.z.gain == pytest.approx(expected, rel=0.03)
     # Horizontally the preset maps like PX4 with MPC_ACC_DECOUPLE: the tilt is atan(a_xy / g) and
-    # the thrust whatever holds the altitude, so at hover the horizontal acceleration is a_xy
-    # whatever the hover-thrust error: gain 1 (a non-decoupled mapping would give 0.9 here too).
+    # the collective is meant for the vertical demand, so the autopilot is asked for a_xy (g + a_up) / g
+    # (identify reads the setpoints through that mapping, as the app sends them through its
+    # inverse). Every thrust being 0.9 of what the mapping meant, the horizontal gain is the vertical
+    # one: the model the app then inverts flies a_xy exactly.
     assert params.accel_decouple
-    assert ident.xy.gain == pytest.approx(1.0, rel=0.03)
+    assert ident.xy.gain == pytest.approx(expected, rel=0.03)
     # gain < 1 is told apart from gain 1: the wrong parameter is visible, not absorbed elsewhere
     assert ident.z.gain < 0.95
     # the vertical thrust deficit shows as a constant: (expected - 1) * g = -0.98 m/s^2 (z up)

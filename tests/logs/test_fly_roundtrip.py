@@ -34,7 +34,7 @@ def test_fly_logs_replay_and_plot(
 
     from pf_offboard.app.fly import add_arguments, fly
 
-    mock_config = MockConfig(
+    mock_config = MockConfig(vehicle="fast", 
         profile=autopilot, spawn=SpawnSpec("hover", (-1.5, 0.0, -2.0)),  # NED: PF1 start (0, -1.5, 2) ENU
         udp_local_port=0, udp_remote=None, tcp_port=None, lockstep=True, lockstep_dt_s=0.01,
     )  # fmt: skip
@@ -74,7 +74,7 @@ def test_fly_logs_replay_and_plot(
     # `sim` writes the same files, with the same step-log columns
     from pf_offboard.sim import SimSpec, simulate
 
-    sim = simulate(PAPER, SimSpec(duration_s=0.1, output_mode=output, autopilot=autopilot), tmp_path / "sim")
+    sim = simulate(PAPER, SimSpec(vehicle="fast", duration_s=0.1, output_mode=output, autopilot=autopilot), tmp_path / "sim")
     assert sorted(p.name for p in sim.paths.tlog.parent.iterdir()) == sorted(p.name for p in log_dir.iterdir())
     assert sim.paths.steps_csv.read_text().splitlines()[0] == csv.read_text().splitlines()[0]
     capsys.readouterr()

@@ -35,7 +35,7 @@ def soft_paper(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_hover_flight_logs_match_the_link(tmp_path: Path) -> None:
-    spec = SimSpec(start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, duration_s=2.0, epoch_unix_s=EPOCH)
+    spec = SimSpec(vehicle="fast", start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, duration_s=2.0, epoch_unix_s=EPOCH)
     result = simulate(PAPER, spec, tmp_path)
     assert result.reason == "duration 2 s reached" and not result.crashed
     entries = read_tlog(result.paths.tlog)
@@ -60,7 +60,7 @@ def test_hover_flight_logs_match_the_link(tmp_path: Path) -> None:
 
 
 def test_sim_is_deterministic(tmp_path: Path) -> None:
-    spec = SimSpec(start_enu_m=(0.5, -1.0, 2.5), rate_hz=50.0, duration_s=1.0, epoch_unix_s=EPOCH, seed=7)
+    spec = SimSpec(vehicle="fast", start_enu_m=(0.5, -1.0, 2.5), rate_hz=50.0, duration_s=1.0, epoch_unix_s=EPOCH, seed=7)
     a = simulate(PAPER, spec, tmp_path / "a")
     b = simulate(PAPER, spec, tmp_path / "b")
     assert a.paths.tlog.read_bytes() == b.paths.tlog.read_bytes()
@@ -69,7 +69,7 @@ def test_sim_is_deterministic(tmp_path: Path) -> None:
 
 def test_soft_gains_converge_from_hover(tmp_path: Path, soft_paper: Path) -> None:
     """Closed loop (core + app pipeline + mock PX4): onto the paper's path and at speed."""
-    spec = SimSpec(start_enu_m=(0.3, -1.8, 2.2), rate_hz=50.0, duration_s=7.0, epoch_unix_s=EPOCH)  # 0.39 m off
+    spec = SimSpec(vehicle="fast", start_enu_m=(0.3, -1.8, 2.2), rate_hz=50.0, duration_s=7.0, epoch_unix_s=EPOCH)  # 0.39 m off
     result = simulate(soft_paper, spec, tmp_path)
     s = result.summary
     assert s.convergence_time_s is not None and s.convergence_time_s < 5.5, s.lines()
@@ -80,7 +80,7 @@ def test_soft_gains_converge_from_hover(tmp_path: Path, soft_paper: Path) -> Non
 
 def test_throw_activates_at_the_height(tmp_path: Path, soft_paper: Path) -> None:
     throw = (1.0, -2.0, 1.0, 0.5, 1.0, 5.0)  # ENU: z up, thrown upwards at 5 m/s
-    spec = SimSpec(throw_enu=throw, throw_height_m=2.0, rate_hz=50.0, duration_s=5.0, epoch_unix_s=EPOCH)
+    spec = SimSpec(vehicle="fast", throw_enu=throw, throw_height_m=2.0, rate_hz=50.0, duration_s=5.0, epoch_unix_s=EPOCH)
     result = simulate(soft_paper, spec, tmp_path)
     recs = result.records
     first = next(i for i, r in enumerate(recs) if r.active)
@@ -99,7 +99,7 @@ def test_throw_activates_at_the_height(tmp_path: Path, soft_paper: Path) -> None
 
 
 def test_ardupilot_attitude_flight(tmp_path: Path) -> None:
-    spec = SimSpec(start_enu_m=(0.0, -1.5, 2.0), autopilot="ardupilot", output_mode="attitude",
+    spec = SimSpec(vehicle="fast", start_enu_m=(0.0, -1.5, 2.0), autopilot="ardupilot", output_mode="attitude",
                    rate_hz=50.0, duration_s=1.0, epoch_unix_s=EPOCH)  # fmt: skip
     result = simulate(PAPER, spec, tmp_path)
     entries = read_tlog(result.paths.tlog)
@@ -115,7 +115,7 @@ def test_ardupilot_attitude_flight(tmp_path: Path) -> None:
 
 
 def test_sim_then_plot(tmp_path: Path, soft_paper: Path) -> None:
-    spec = SimSpec(start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, duration_s=1.5, epoch_unix_s=EPOCH, name="PF1")
+    spec = SimSpec(vehicle="fast", start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, duration_s=1.5, epoch_unix_s=EPOCH, name="PF1")
     result = simulate(soft_paper, spec, tmp_path)
     pngs = make_figures([result.paths.tlog], tmp_path / "fig")  # config found beside the log
     assert sorted(p.name for p in pngs) == ["PF1_tangential.png", "PF1_transversal.png", "map.png", "path3d.png"]
@@ -172,16 +172,16 @@ def test_cli_bad_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
 
 def test_spec_checks() -> None:
     with pytest.raises(InputError, match="--autopilot"):
-        simulate(PAPER, SimSpec(autopilot="inav"), "/nonexistent")
+        simulate(PAPER, SimSpec(vehicle="fast", autopilot="inav"), "/nonexistent")
     with pytest.raises(InputError, match="--throw: give either --start"):
-        simulate(PAPER, SimSpec(start_enu_m=(0, 0, 2), throw_enu=(0, 0, 1, 0, 0, 3)), "/nonexistent")
+        simulate(PAPER, SimSpec(vehicle="fast", start_enu_m=(0, 0, 2), throw_enu=(0, 0, 1, 0, 0, 3)), "/nonexistent")
 
 
 def test_laps_end_the_flight(tmp_path: Path, soft_paper: Path) -> None:
     from pf_offboard.control import PathFollower
 
     length_m = PathFollower.from_config(soft_paper).path.length_m
-    spec = SimSpec(start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, laps=0.2, epoch_unix_s=EPOCH)
+    spec = SimSpec(vehicle="fast", start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, laps=0.2, epoch_unix_s=EPOCH)
     result = simulate(soft_paper, spec, tmp_path)
     assert result.reason == "0.2 laps done"
     steps = [b.eta1_m - a.eta1_m for a, b in zip(result.records[1:], result.records[2:])]

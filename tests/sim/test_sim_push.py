@@ -44,7 +44,7 @@ def test_bad_push_exits_2(tmp_path: Path, text: str, message: str, capsys: pytes
 
 def test_push_reaches_the_mock_in_ned(tmp_path: Path) -> None:
     """An east push (ENU x) is a NED y push: the same flight until it starts, then shoved east."""
-    spec = SimSpec(start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, duration_s=0.6, epoch_unix_s=1.78e9)
+    spec = SimSpec(vehicle="fast", start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, duration_s=0.6, epoch_unix_s=1.78e9)
     free = simulate(PAPER, spec, tmp_path / "free").records
     pushed = simulate(PAPER, replace(spec, push=(0.2, 0.3, 8.0, 0.0, 0.0)), tmp_path / "pushed").records
     for a, b in zip(free, pushed):
@@ -55,5 +55,5 @@ def test_push_reaches_the_mock_in_ned(tmp_path: Path) -> None:
             assert dv[0] == pytest.approx(8.0 * (a.time_s - 0.2), rel=0.1)
             assert abs(dv[1]) < 0.1 * dv[0] and abs(dv[2]) < 0.1 * dv[0]
     with pytest.raises(InputError) as exc:
-        simulate(PAPER, SimSpec(push=(0.0, 99.0, 1.0, 0.0, 0.0), duration_s=0.1), tmp_path / "bad")
+        simulate(PAPER, SimSpec(vehicle="fast", push=(0.0, 99.0, 1.0, 0.0, 0.0), duration_s=0.1), tmp_path / "bad")
     assert exc.value.field == "--push"

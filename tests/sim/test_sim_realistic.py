@@ -80,4 +80,4 @@ def test_every_preset_flies_a_short_sim(tmp_path: Path, vehicle: str) -> None:
 
 def test_spec_rejects_bad_wind() -> None:
     with pytest.raises(InputError, match="--wind"):
-        simulate(PAPER, SimSpec(wind_enu_m_s=(float("nan"), 0.0, 0.0)), "/nonexistent")
+        simulate(PAPER, SimSpec(vehicle="fast", wind_enu_m_s=(float("nan"), 0.0, 0.0)), "/nonexistent")

@@ -20,7 +20,7 @@ THROW = (0.5, -1.5, 4.0, 1.0, 0.0, 0.5)
 
 
 def test_attitude_and_rates_reach_the_mock_in_ned_frd(tmp_path: Path) -> None:
-    spec = SimSpec(throw_enu=THROW, throw_q_enu_flu=Q_ENU_FLU, throw_body_rates_flu_rad_s=(1.0, 2.0, -0.5), duration_s=0.05)
+    spec = SimSpec(vehicle="fast", throw_enu=THROW, throw_q_enu_flu=Q_ENU_FLU, throw_body_rates_flu_rad_s=(1.0, 2.0, -0.5), duration_s=0.05)
     flight = SimFlight(PAPER, spec, tmp_path, write_logs=False)
     truth = flight.autopilot.truth
     np.testing.assert_allclose(truth.q_ned_frd, frames.quat_enu_flu_to_ned_frd(Q_ENU_FLU), atol=1e-12)
@@ -29,9 +29,9 @@ def test_attitude_and_rates_reach_the_mock_in_ned_frd(tmp_path: Path) -> None:
 
 
 def test_engage_at_once_or_after_a_delay_without_files(tmp_path: Path) -> None:
-    at_once = simulate(PAPER, SimSpec(throw_enu=THROW, throw_engage_after_s=0.0, duration_s=0.5, rate_hz=50.0), tmp_path,
+    at_once = simulate(PAPER, SimSpec(vehicle="fast", throw_enu=THROW, throw_engage_after_s=0.0, duration_s=0.5, rate_hz=50.0), tmp_path,
                        write_logs=False)  # fmt: skip
-    later = simulate(PAPER, SimSpec(throw_enu=THROW, throw_engage_after_s=0.3, duration_s=0.5, rate_hz=50.0), tmp_path,
+    later = simulate(PAPER, SimSpec(vehicle="fast", throw_enu=THROW, throw_engage_after_s=0.3, duration_s=0.5, rate_hz=50.0), tmp_path,
                      write_logs=False)  # fmt: skip
     assert at_once.activation_time_s == pytest.approx(0.0, abs=0.021)
     assert later.activation_time_s == pytest.approx(0.3, abs=0.021)

@@ -31,7 +31,7 @@ def tracking_config(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.mark.parametrize("output", ["acceleration", "attitude", "rates"])
 def test_tracker_flies_every_output_mode_and_replays(tmp_path: Path, tracking_config: Path, output: str) -> None:
-    spec = SimSpec(start_enu_m=(0.2, -1.7, 2.1), output_mode=output, rate_hz=50.0, duration_s=3.0,
+    spec = SimSpec(vehicle="fast", start_enu_m=(0.2, -1.7, 2.1), output_mode=output, rate_hz=50.0, duration_s=3.0,
                    epoch_unix_s=1.78e9)  # fmt: skip
     result = simulate(tracking_config, spec, tmp_path)
     assert not result.crashed and result.reason == "duration 3 s reached"

@@ -19,7 +19,7 @@ DT = 0.004
 
 
 def make(profile: str = "px4", **changes) -> Autopilot:
-    ap = Autopilot(replace(MockConfig(profile=profile, ekf_ready_delay_s=0.2), **changes))
+    ap = Autopilot(replace(MockConfig(vehicle="fast", profile=profile, ekf_ready_delay_s=0.2), **changes))
     ap.add_link(0)
     return ap
 

@@ -80,7 +80,7 @@ def test_argparse_errors_exit_2() -> None:
 def test_duration_runs_and_writes_truth_log(tmp_path) -> None:
     log = tmp_path / "truth.csv"
     result = subprocess.run(
-        [sys.executable, "-m", "sitl_mock", "--udp-local", "0", "--udp-remote", "none", "--speed", "20",
+        [sys.executable, "-m", "sitl_mock", "--vehicle", "fast", "--udp-local", "0", "--udp-remote", "none", "--speed", "20",
          "--duration", "1.0", "--spawn", "throw:0,0,-30,2,0,0", "--truth-log", str(log), "--print-ports"],
         capture_output=True, text=True, timeout=60,
     )

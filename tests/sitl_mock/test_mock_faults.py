@@ -70,7 +70,7 @@ def test_loss_and_corruption_over_udp() -> None:
     """At 10x speed, ATTITUDE (100 Hz) arrives at ~(1 - loss) of its rate; corrupted ones fail CRC."""
 
     async def scenario() -> tuple[int, int, float]:
-        config = MockConfig(udp_local_port=0, udp_remote=None, speed=10.0, spawn=SpawnSpec("hover", (0, 0, -5)),
+        config = MockConfig(vehicle="fast", udp_local_port=0, udp_remote=None, speed=10.0, spawn=SpawnSpec("hover", (0, 0, -5)),
                             faults=FaultConfig(loss=0.3, corrupt=0.1))
         async with MockAutopilot(config) as mock:
             loop = asyncio.get_running_loop()

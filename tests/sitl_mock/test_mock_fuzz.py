@@ -51,7 +51,7 @@ def test_malformed_traffic_never_reaches_the_dynamics(profile: str) -> None:
     rng = np.random.default_rng(1)
     kinds: set[str] = set()
     for _ in range(10):
-        ap = Autopilot(replace(MockConfig(profile=profile, ekf_ready_delay_s=0.2),
+        ap = Autopilot(replace(MockConfig(vehicle="fast", profile=profile, ekf_ready_delay_s=0.2),
                                spawn=SpawnSpec("hover", (0.0, 0.0, -10.0))))
         ap.add_link(0)
         for _ in range(125):

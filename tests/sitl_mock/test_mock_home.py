@@ -44,7 +44,7 @@ def _run(ap: Autopilot, seconds: float) -> None:
 
 @pytest.mark.parametrize("profile", ["px4", "ardupilot"])
 def test_request_message_answers_origin_and_home(profile: str) -> None:
-    ap = Autopilot(MockConfig(profile=profile, home_lat_deg=CANBERRA[0], home_lon_deg=CANBERRA[1], home_alt_m=CANBERRA[2]))
+    ap = Autopilot(MockConfig(vehicle="fast", profile=profile, home_lat_deg=CANBERRA[0], home_lon_deg=CANBERRA[1], home_alt_m=CANBERRA[2]))
     _run(ap, 1.0)  # past the position-estimate delay (0.5 s)
     for msgid, kind in ((mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, "GPS_GLOBAL_ORIGIN"), (mavlink.MAVLINK_MSG_ID_HOME_POSITION, "HOME_POSITION")):
         replies = [m for _, m in _request(ap, msgid)]
@@ -55,7 +55,7 @@ def test_request_message_answers_origin_and_home(profile: str) -> None:
 
 
 def test_ardupilot_has_no_origin_before_its_ekf() -> None:
-    ap = Autopilot(MockConfig(profile="ardupilot"))
+    ap = Autopilot(MockConfig(vehicle="fast", profile="ardupilot"))
     replies = [m for _, m in _request(ap, mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)]
     assert len(replies) == 1 and replies[0].result == mavlink.MAV_RESULT_FAILED
 
@@ -64,7 +64,7 @@ def test_px4_streams_origin_and_home() -> None:
     streams = dict(PROFILES["px4"].streams)
     assert streams[mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN] == pytest.approx(0.1)
     assert streams[mavlink.MAVLINK_MSG_ID_HOME_POSITION] == pytest.approx(0.5)
-    ap = Autopilot(MockConfig(profile="px4"))
+    ap = Autopilot(MockConfig(vehicle="fast", profile="px4"))
     ap.add_link(0)
     seen = set()
     for _ in range(int(10.5 / 0.004)):

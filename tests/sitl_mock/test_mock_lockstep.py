@@ -33,7 +33,7 @@ def _collect(client: UdpClient, records: list[str], until_lpn: bool) -> None:
 
 
 def _fly(seed: int, faults: FaultConfig) -> tuple[list[str], float, float]:
-    config = MockConfig(udp_local_port=0, udp_remote=None, lockstep=True, seed=seed, faults=faults,
+    config = MockConfig(vehicle="fast", udp_local_port=0, udp_remote=None, lockstep=True, seed=seed, faults=faults,
                         spawn=SpawnSpec("hover", (0.0, 0.0, -10.0)))
     records: list[str] = []
     with run_in_thread(config) as mock, UdpClient(mock.ports.udp, timeout_s=0.02) as client:
@@ -67,7 +67,7 @@ def test_lockstep_is_deterministic_with_faults() -> None:
 
 
 def test_spawned_subprocess_serves_and_stops() -> None:
-    config = MockConfig(udp_local_port=0, udp_remote=None, lockstep=True)
+    config = MockConfig(vehicle="fast", udp_local_port=0, udp_remote=None, lockstep=True)
     with spawn(config) as handle, UdpClient(handle.ports.udp) as client:
         client.send(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3))
         hb = client.wait("HEARTBEAT", timeout_s=5.0)

@@ -35,7 +35,7 @@ def test_mavsdk_connects_arms_and_flies_offboard() -> None:
     async def scenario() -> None:
         port = free_udp_port()
         # speed 2: PX4 scales the offboard-loss timeout with the speed factor, MAVSDK resends at 20 Hz.
-        config = MockConfig(udp_local_port=0, udp_remote=("127.0.0.1", port), speed=2.0)
+        config = MockConfig(vehicle="fast", udp_local_port=0, udp_remote=("127.0.0.1", port), speed=2.0)
         async with MockAutopilot(config) as mock:
             sdk_config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
             async with Mavsdk(sdk_config) as sdk:
@@ -103,7 +103,7 @@ def test_mavsdk_connects_arms_and_flies_offboard() -> None:
 def test_mavsdk_takeoff_and_land() -> None:
     async def scenario() -> None:
         port = free_udp_port()
-        config = MockConfig(udp_local_port=0, udp_remote=("127.0.0.1", port), speed=5.0)
+        config = MockConfig(vehicle="fast", udp_local_port=0, udp_remote=("127.0.0.1", port), speed=5.0)
         async with MockAutopilot(config) as mock:
             sdk_config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
             async with Mavsdk(sdk_config) as sdk:

@@ -42,7 +42,7 @@ def _sim_wait(mock, seconds: float, conn) -> None:
 
 
 def test_mavutil_guided_takeoff_and_setpoints() -> None:
-    config = MockConfig(profile="ardupilot", udp_local_port=None, udp_remote=None, tcp_port=0, speed=5.0)
+    config = MockConfig(vehicle="fast", profile="ardupilot", udp_local_port=None, udp_remote=None, tcp_port=0, speed=5.0)
     with run_in_thread(config) as mock:
         conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{mock.ports.tcp}", source_system=255, source_component=190)
         try:

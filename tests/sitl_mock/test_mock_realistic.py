@@ -22,7 +22,7 @@ def _hover(vehicle: str, profile: str = "px4", **kw: object) -> Autopilot:
 
 
 def test_one_default_constant_and_every_preset_selectable() -> None:
-    assert DEFAULT_VEHICLE == "fast"  # until the controller meets issue 8's targets on REALISTIC_VEHICLE
+    assert DEFAULT_VEHICLE == REALISTIC_VEHICLE == "px4-sih"  # the controller meets issue 8's targets on it
     assert REALISTIC_VEHICLE in PRESET_NAMES
     assert MockConfig().vehicle == DEFAULT_VEHICLE == _config().vehicle
     for name in PRESET_NAMES:
@@ -121,3 +121,32 @@ def test_hover_thrust_param_set_reaches_the_acceleration_mapping() -> None:
         state = ap.sim.step(0.004, AccelerationSetpoint((0.0, 0.0, 0.0), yaw_rad=0.0))
     assert state.thrust_norm_sp == pytest.approx(0.35, rel=1e-6)
     assert state.accel_ned_m_s2[2] < -9.80665 * (0.35 / true_hover - 1.0) * 0.5  # climbing
+
+
+@pytest.mark.parametrize(("vehicle", "reported"), [("px4-sih", 1), ("fast", 0)])
+def test_acc_decouple_param_reports_and_switches_the_acceleration_mapping(vehicle: str, reported: int) -> None:
+    """MPC_ACC_DECOUPLE says how the mapping tilts (1: from g alone, PX4's default and the px4-sih
+    preset's; 0: from the whole demand, the ideal preset's); PARAM_SET switches it, with a climb
+    demand the horizontal acceleration flown then changes by (g + a_up) / g; other values are refused."""
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from sitl_mock.dynamics import AccelerationSetpoint
+
+    ap = _hover(vehicle)
+    assert ap.params["MPC_ACC_DECOUPLE"] == reported and ap.sim.params.accel_decouple is bool(reported)
+
+    def horizontal_flown() -> float:
+        for _ in range(250):  # 1 s: the attitude and thrust have settled on the setpoint
+            state = ap.sim.step(0.004, AccelerationSetpoint((2.0, 0.0, -2.0), yaw_rad=0.0))  # north, climbing 2 m/s^2
+        return float(state.accel_ned_m_s2[0] + ap.sim.params.drag_1_s * state.velocity_ned_m_s[0])
+
+    first = horizontal_flown()
+    wire = np.frombuffer(np.int32(1 - reported).tobytes(), np.float32)[0]  # PX4 packs INT32 bytewise
+    ap.handle(mavlink.MAVLink_param_set_message(1, 1, b"MPC_ACC_DECOUPLE", float(wire), mavlink.MAV_PARAM_TYPE_INT32), 0)
+    assert ap.params["MPC_ACC_DECOUPLE"] == 1 - reported and ap.sim.params.accel_decouple is not bool(reported)
+    second = horizontal_flown()
+    decoupled, coupled = (first, second) if reported else (second, first)
+    assert decoupled / coupled == pytest.approx((9.80665 + 2.0) / 9.80665, rel=0.03)
+    ap.handle(mavlink.MAVLink_param_set_message(1, 1, b"MPC_ACC_DECOUPLE", float(np.frombuffer(np.int32(2).tobytes(), np.float32)[0]),
+                                                mavlink.MAV_PARAM_TYPE_INT32), 0)  # fmt: skip
+    assert ap.params["MPC_ACC_DECOUPLE"] == 1 - reported

@@ -70,7 +70,7 @@ class _Collector:
 async def _measure(profile: str, requests: list[tuple[int, int]]) -> dict[str, float]:
     client = _Collector()
     try:
-        config = MockConfig(profile=profile, udp_local_port=0, udp_remote=("127.0.0.1", client.port), speed=20.0,
+        config = MockConfig(vehicle="fast", profile=profile, udp_local_port=0, udp_remote=("127.0.0.1", client.port), speed=20.0,
                             spawn=SpawnSpec("hover", (0.0, 0.0, -5.0)))
         async with MockAutopilot(config) as mock:
             for msgid, interval_us in requests:

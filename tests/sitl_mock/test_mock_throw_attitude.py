@@ -17,7 +17,7 @@ TILTED = (S, S, 0.0, 0.0)  # 90 deg roll
 
 def test_a_throw_starts_with_its_attitude_and_spin() -> None:
     spawn = SpawnSpec("throw", (0.0, 0.0, -10.0), (1.0, 0.0, 0.0), TILTED, (0.5, -1.0, 2.0))
-    ap = Autopilot(MockConfig(spawn=spawn, lockstep=True))
+    ap = Autopilot(MockConfig(vehicle="fast", spawn=spawn, lockstep=True))
     np.testing.assert_allclose(ap.truth.q_ned_frd, TILTED, atol=1e-12)
     np.testing.assert_allclose(ap.truth.rates_frd_rad_s, (0.5, -1.0, 2.0), atol=1e-12)
     assert ap.motors_locked
@@ -29,7 +29,7 @@ def test_the_spawn_text_round_trips_with_and_without_attitude() -> None:
     assert plain.args() == "throw:1.0,2.0,-3.0,0.0,1.0,0.0"  # unchanged form for a plain throw
     for spawn in (spin, plain, SpawnSpec("hover", (0.0, 0.0, -2.0)), SpawnSpec("ground", (1.0, 2.0, 0.0))):
         assert SpawnSpec.parse(spawn.args()) == spawn
-        config = MockConfig(spawn=spawn)
+        config = MockConfig(vehicle="fast", spawn=spawn)
         assert config_from_args(build_parser().parse_args(config_to_args(config))).spawn == spawn
 
 
@@ -43,7 +43,7 @@ def test_the_spawn_text_round_trips_with_and_without_attitude() -> None:
 ])
 def test_bad_attitude_or_rates_name_the_field(spawn: SpawnSpec, field: str) -> None:
     with pytest.raises(MockConfigError) as exc:
-        MockConfig(spawn=spawn).validate()
+        MockConfig(vehicle="fast", spawn=spawn).validate()
     assert exc.value.field == field
 
 

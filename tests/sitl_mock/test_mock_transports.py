@@ -22,7 +22,7 @@ def test_udp_default_remote_and_extra_senders_and_tcp_clients() -> None:
         listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         listener.bind(("127.0.0.1", listen_port))  # like MAVSDK's udp://:14540
         listener.settimeout(5.0)
-        config = MockConfig(udp_local_port=0, udp_remote=("127.0.0.1", listen_port), tcp_port=0, speed=5.0)
+        config = MockConfig(vehicle="fast", udp_local_port=0, udp_remote=("127.0.0.1", listen_port), tcp_port=0, speed=5.0)
         loop = asyncio.get_running_loop()
         async with MockAutopilot(config) as mock:
 
@@ -74,7 +74,7 @@ def test_garbage_traffic_is_dropped_and_the_link_keeps_working() -> None:
     rng = np.random.default_rng(3)
 
     async def scenario() -> None:
-        config = MockConfig(udp_local_port=0, udp_remote=None, tcp_port=0, speed=5.0)
+        config = MockConfig(vehicle="fast", udp_local_port=0, udp_remote=None, tcp_port=0, speed=5.0)
         loop = asyncio.get_running_loop()
         async with MockAutopilot(config) as mock:
 
