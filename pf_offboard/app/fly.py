@@ -452,7 +452,7 @@ async def read_setpoint_mapping(bridge: Any, profile: Any, settings: FlightSetti
         return
     if value not in (0.0, 1.0):
         raise LinkError(f"{profile.accel_tilt_param} = {value:g} is neither 0 nor 1")
-    pipeline.encoder = pipeline.encoder.with_tilt_from_gravity(value == 1.0)
+    pipeline.encoder = pipeline.encoder.with_tilt_from_gravity(profile.tilts_from_gravity(value))
 
 
 async def _check_guid_options(bridge: Any, required: int, allow_set: bool, output_mode: str) -> None:

@@ -76,6 +76,13 @@ class Profile:
     def name(self) -> str:
         return self.autopilot.value
 
+    def tilts_from_gravity(self, reported: float | None) -> bool:
+        """Whether the autopilot tilts from g alone for acceleration setpoints, given the value it
+        reported for :attr:`accel_tilt_param` (None, or anything but 0 / 1: its default)."""
+        if reported in (0.0, 1.0):
+            return reported == 1.0
+        return self.accel_tilt_from_gravity
+
     def is_offboard(self, custom_mode: int) -> bool:
         """True when a HEARTBEAT custom_mode says the vehicle is in our mode."""
         if self.autopilot is Autopilot.PX4:

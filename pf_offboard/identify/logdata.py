@@ -340,11 +340,9 @@ def _tilts_from_gravity(raw: _Raw) -> bool:
 
     profile = PX4 if raw.autopilot == _MAV_AUTOPILOT_PX4 else ARDUPILOT
     name = profile.accel_tilt_param
-    if name is not None and name in raw.params:
-        value = param_value_decode(raw.params[name], raw.param_types.get(name, 9), profile is PX4)
-        if value in (0.0, 1.0):
-            return value == 1.0
-    return profile.accel_tilt_from_gravity
+    if name is None or name not in raw.params:
+        return profile.tilts_from_gravity(None)
+    return profile.tilts_from_gravity(param_value_decode(raw.params[name], raw.param_types.get(name, 9), profile is PX4))
 
 
 def _setpoint_accel(

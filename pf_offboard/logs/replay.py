@@ -234,11 +234,8 @@ def _tilt_from_gravity(entries: Sequence[TlogEntry], profile: Any, options: Repl
 
     if options.tilt_from_gravity is not None:
         return options.tilt_from_gravity
-    if profile.accel_tilt_param is not None:
-        value = _param_from_log(entries, profile.accel_tilt_param, profile.autopilot is Autopilot.PX4)
-        if value in (0.0, 1.0):
-            return value == 1.0
-    return bool(profile.accel_tilt_from_gravity)
+    name = profile.accel_tilt_param
+    return bool(profile.tilts_from_gravity(None if name is None else _param_from_log(entries, name, profile.autopilot is Autopilot.PX4)))
 
 
 def build_pipeline(

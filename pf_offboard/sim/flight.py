@@ -450,8 +450,8 @@ class SimFlight:
             value = param_value_decode(msg.param_value, msg.param_type, self.profile.name == "px4")
             if pid == self.profile.hover_thrust_param and self.settings.hover_thrust is None:
                 self.pipeline.encoder = self.pipeline.encoder.with_hover_thrust(float(value))
-            elif pid == self.profile.accel_tilt_param and self.settings.output_mode == "acceleration" and value in (0.0, 1.0):
-                self.pipeline.encoder = self.pipeline.encoder.with_tilt_from_gravity(value == 1.0)
+            elif pid == self.profile.accel_tilt_param and self.settings.output_mode == "acceleration":
+                self.pipeline.encoder = self.pipeline.encoder.with_tilt_from_gravity(self.profile.tilts_from_gravity(value))
             return
         if kind == "COMMAND_ACK":
             if msg.command == mavlink.MAV_CMD_DO_SET_MODE and self._mode_requested and self.phase == "engaging":

@@ -47,3 +47,12 @@ def test_what_each_output_mode_needs() -> None:
 
 def test_armed_flag() -> None:
     assert is_armed(0x91) and not is_armed(0x11)
+
+
+def test_tilt_from_gravity_by_the_reported_parameter() -> None:
+    """PX4 reports MPC_ACC_DECOUPLE (1: tilt from g alone, its default); ArduPilot has no such
+    parameter and always tilts from g alone. Unreported or invalid: the autopilot's default."""
+    assert PX4.accel_tilt_param == "MPC_ACC_DECOUPLE" and ARDUPILOT.accel_tilt_param is None
+    assert PX4.tilts_from_gravity(1.0) and not PX4.tilts_from_gravity(0.0)
+    assert PX4.tilts_from_gravity(None) and PX4.tilts_from_gravity(2.0) and PX4.tilts_from_gravity(float("nan"))
+    assert ARDUPILOT.tilts_from_gravity(None)
