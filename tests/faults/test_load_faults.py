@@ -64,17 +64,22 @@ def test_heartbeats_and_setpoints_keep_going_out_during_a_telemetry_flood(tmp_pa
     duration_s = 8.0
     with run_in_thread(mock_config(app_port)) as mock:
         mock.call(lambda m: setattr(m, "on_received", record))
+        started_wall_s = time.monotonic()
         try:
             outcome, printed = fly_udpin(app_port, config, tmp_path / "log", "--airborne", "--duration", str(duration_s), on_start=start_flood)
         finally:
+            ended_wall_s = time.monotonic()
             for p in flood:
                 sent = int(p.communicate(timeout=30)[0].strip() or 0)
         steps = mock.call(lambda m: m.steps)
         mode = mock.call(lambda m: m.autopilot.mode.name)
     counters = outcome.link_counters
-    gaps = [b - a for a, b in zip(heartbeats_wall_s, heartbeats_wall_s[1:])]
+    # from the start of fly to its end: the lockstep flight's wall time depends on the machine (1-2 s
+    # here), so the cadence is checked over the flight's own span, not by a count of HEARTBEATs
+    edges = [started_wall_s, *heartbeats_wall_s, ended_wall_s]
+    gaps = [b - a for a, b in zip(edges, edges[1:])]
     print(f"\nflood: {sent} datagrams sent, {counters.foreign_peer} read and refused, {counters.reader_yields} reader "
-          f"yields; app HEARTBEATs {len(heartbeats_wall_s)}, largest gap {max(gaps, default=0):.2f} s; "
+          f"yields; app HEARTBEATs {len(heartbeats_wall_s)} in {ended_wall_s - started_wall_s:.2f} s, largest gap {max(gaps):.2f} s; "
           f"{steps} lockstep steps")  # fmt: skip
     assert outcome.exit_code == 0, printed  # the flight ran its simulated duration: never stale, never starved
     assert mode == "AUTO.LOITER"
@@ -82,6 +87,6 @@ def test_heartbeats_and_setpoints_keep_going_out_during_a_telemetry_flood(tmp_pa
     # setpoints kept going out: lockstep advances one step per setpoint, the whole duration was flown
     assert steps >= duration_s * RATE_HZ
     # the HEARTBEAT task kept its 1 s cadence (a starvation bound, not a speed target: before, 11-38 s)
-    assert len(heartbeats_wall_s) >= 2 and max(gaps) <= 2.5, gaps
+    assert heartbeats_wall_s and max(gaps) <= 2.5, gaps
     # no spoofed sample was flown
     assert all(abs(r.position_enu_m[0]) < 5.0 for r in outcome.records)

@@ -1,0 +1,114 @@
+"""Issue 8's targets on the real autopilots in SITL, when one is built on this machine (opt-in).
+
+Skipped unless an environment variable points at a SITL build (CI has none, and stays green):
+
+- ``PF_OFFBOARD_PX4_SITL``: PX4's ``build/px4_sitl_default`` directory (``bin/px4`` and ``rootfs``),
+  built as ``../shared/notes/px4-sitl.md`` says. Each test boots a fresh SIH quadrotor (airframe
+  10040): it deletes ``parameters.bson``, ``parameters_backup.bson`` and ``dataman`` in that
+  ``rootfs``, as the notes do.
+- ``PF_OFFBOARD_ARDUCOPTER``: ArduPilot's ``build/sitl/bin/arducopter`` (its ``copter.parm`` is found
+  beside the source tree), built as ``../shared/notes/ardupilot-sitl.md`` says.
+
+Each flight is ``pf-offboard fly --takeoff 2`` with the shipped config for that autopilot, as a user
+runs it, measured from activation + 8 s on the autopilot's estimate. PX4 SIH flies five laps:
+over two, the speed error depends on which 13 s of EKF2's noise the window sees (3.9-5.5 cm/s
+with the app started 3-35 s after PX4's boot, in every output mode; README), over five it is
+4.4-5.0. ArduCopter flies two. Targets: cross-track RMS <= 5 cm, speed error RMS <= 5 cm/s, |mean|
+<= 2 cm/s. These run on the wall clock (the autopilots' own speed factor 1): about 1.5 min each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pf_offboard.app.fly import add_arguments, fly
+from pf_offboard.logs.steplog import read_steplog
+
+pytestmark = pytest.mark.real_sitl
+
+REPO = Path(__file__).resolve().parents[2]
+PX4_BUILD = os.environ.get("PF_OFFBOARD_PX4_SITL")
+ARDUCOPTER = os.environ.get("PF_OFFBOARD_ARDUCOPTER")
+SETTLE_S = 8.0
+
+
+def _figures(log_dir: Path) -> tuple[float, float, float]:
+    """(cross-track RMS m, speed error RMS m/s, mean speed error m/s) from activation + 8 s."""
+    recs = [r for r in read_steplog(log_dir / "flight.csv") if r.mode == "following"]
+    late = [r for r in recs if r.time_s >= recs[0].time_s + SETTLE_S]
+    assert late and late[-1].time_s - late[0].time_s > 10.0, "too short a flight to measure"
+    ct = np.array([r.cross_track_m for r in late])
+    err = np.array([r.eta2_m_s - r.speed_ref_m_s for r in late])
+    return float(np.sqrt(np.mean(ct**2))), float(np.sqrt(np.mean(err**2))), float(np.mean(err))
+
+
+def _fly(log_dir: Path, connect: str, config: str, laps: int, *flags: str) -> tuple[float, float, float]:
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--connect", connect, "--config", str(REPO / "configs" / f"{config}.yaml"), "--takeoff", "2",
+                              "--laps", str(laps), "--log-dir", str(log_dir), "--quiet", *flags])  # fmt: skip
+    outcome = fly(args)
+    assert outcome.exit_code == 0, outcome.reason
+    return _figures(log_dir)
+
+
+@contextmanager
+def _running(command: list[str], cwd: Path, log: Path) -> Iterator[None]:
+    """A SITL process in its own session (it is stopped with SIGTERM, then SIGKILL)."""
+    with log.open("w") as out:
+        # a shell stays its parent: ArduCopter SITL exits when its parent process does
+        proc = subprocess.Popen(["bash", "-c", " ".join(command) + "; true"], cwd=cwd, stdout=out, stderr=subprocess.STDOUT,
+                                start_new_session=True, env={**os.environ, **_px4_env()})  # fmt: skip
+        try:
+            yield
+        finally:
+            os.killpg(proc.pid, signal.SIGTERM)
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+
+
+def _px4_env() -> dict[str, str]:
+    return {"PX4_SIMULATOR": "sihsim", "PX4_SIM_MODEL": "sihsim_quadx", "HEADLESS": "1", "PX4_SIM_SPEED_FACTOR": "1"}
+
+
+def _check(ct: float, rms: float, mean: float, what: str) -> None:
+    print(f"\n{what}: cross-track {100 * ct:.2f} cm, speed error {100 * rms:.2f} cm/s (mean {100 * mean:+.2f})")
+    assert ct <= 0.05 and rms <= 0.05 and abs(mean) <= 0.02
+
+
+@pytest.mark.skipif(PX4_BUILD is None, reason="set PF_OFFBOARD_PX4_SITL to PX4's build/px4_sitl_default to fly the real PX4 SIH")
+@pytest.mark.parametrize("output", ["acceleration", "attitude", "rates"])
+def test_px4_sih_meets_issue_8s_targets(tmp_path: Path, output: str) -> None:
+    build = Path(str(PX4_BUILD))
+    rootfs = build / "rootfs"
+    assert (build / "bin" / "px4").exists(), f"no bin/px4 in {build}"
+    for name in ("parameters.bson", "parameters_backup.bson", "dataman"):  # a fresh vehicle
+        (rootfs / name).unlink(missing_ok=True)
+    with _running(["../bin/px4", "-d"], rootfs, tmp_path / "px4.log"):
+        figures = _fly(tmp_path / "log", "udpin:127.0.0.1:14540", "px4-sih", 5, "--output", output)
+    _check(*figures, f"PX4 SIH, {output}, five laps")
+
+
+@pytest.mark.skipif(ARDUCOPTER is None, reason="set PF_OFFBOARD_ARDUCOPTER to ArduPilot's build/sitl/bin/arducopter to fly ArduCopter SITL")
+@pytest.mark.parametrize("output", ["attitude", "rates"])
+def test_arducopter_meets_issue_8s_targets(tmp_path: Path, output: str) -> None:
+    binary = Path(str(ARDUCOPTER))
+    params = binary.parents[3] / "Tools" / "autotest" / "default_params" / "copter.parm"
+    assert binary.exists() and params.exists(), f"no {binary} or {params}"
+    command = [str(binary), "--model", "+", "--speedup", "1", "--defaults", str(params), "-I0",
+               "--home", "-35.363261,149.165230,584,353", "-w"]  # fmt: skip
+    with _running(command, tmp_path, tmp_path / "arducopter.log"):
+        figures = _fly(tmp_path / "log", "tcp:127.0.0.1:5760", "arducopter", 2, "--output", output, "--set-guid-options")
+    _check(*figures, f"ArduCopter SITL, {output}, two laps")
