@@ -356,9 +356,7 @@ class Bridge:
             return
         if kind == "PARAM_VALUE":
             pid = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
-            self.params[pid.rstrip("\x00")] = param_value_decode(
-                msg.param_value, msg.param_type, self.profile.autopilot is Autopilot.PX4
-            )
+            self.params[pid.rstrip("\x00")] = param_value_decode(msg.param_value, msg.param_type, self.profile.params_bytewise)
             self._changed.set()
             return
         if kind == "STATUSTEXT":
@@ -812,7 +810,7 @@ class Bridge:
 
     async def write_param(self, name: str, value: float, param_type: int) -> float:
         t = self.link.target
-        bytewise = self.profile.autopilot is Autopilot.PX4
+        bytewise = self.profile.params_bytewise
         deadline = self.clock() + self.options.command_timeout_s
         while True:
             self.params.pop(name, None)

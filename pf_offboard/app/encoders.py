@@ -95,7 +95,7 @@ def tilt_from_gravity_setpoint(accel_enu_m_s2: Any) -> tuple[float, float, float
     ``attitude`` output. The vertical part is sent as it is.
     """
     ax, ay, az = (float(a) for a in accel_enu_m_s2)
-    scale = G_M_S2 / max(G_M_S2 + az, _TILT_FROM_GRAVITY_FLOOR * G_M_S2)
+    scale = 1.0 / _collective_over_g(az)
     return ax * scale, ay * scale, az
 
 
@@ -104,8 +104,14 @@ def flown_when_tilting_from_gravity(accel_sent_enu_m_s2: Any) -> tuple[float, fl
     (ENU, m/s², gravity excluded): the horizontal part times (g + a_up) / g, the autopilot's
     collective at least ``g / 4`` (the inverse of :func:`tilt_from_gravity_setpoint`)."""
     ax, ay, az = (float(a) for a in accel_sent_enu_m_s2)
-    scale = max(G_M_S2 + az, _TILT_FROM_GRAVITY_FLOOR * G_M_S2) / G_M_S2
+    scale = _collective_over_g(az)
     return ax * scale, ay * scale, az
+
+
+def _collective_over_g(accel_up_m_s2: float) -> float:
+    """(g + a_up) / g, the vertical specific force an autopilot tilting from g alone sets per g of
+    its tilt; at least ``_TILT_FROM_GRAVITY_FLOOR``."""
+    return max(G_M_S2 + accel_up_m_s2, _TILT_FROM_GRAVITY_FLOOR * G_M_S2) / G_M_S2
 
 
 def yaw_of(q_enu_flu: NDArray[np.float64]) -> float:
@@ -193,17 +199,16 @@ class Encoder:
 
     def with_hover_thrust(self, hover_thrust: float) -> Encoder:
         """The same encoder with the hover thrust read from the autopilot (validated like __init__)."""
-        return Encoder(
-            self.output_mode, self.profile, self.target_system, self.target_component,
-            hover_thrust=hover_thrust, rate_law=self.rate_law, max_body_rate_rad_s=self.max_body_rate_rad_s,
-            tilt_from_gravity=self.tilt_from_gravity,
-        )  # fmt: skip
+        return self._with(hover_thrust, self.tilt_from_gravity)
 
     def with_tilt_from_gravity(self, tilt_from_gravity: bool) -> Encoder:
         """The same encoder with the autopilot's tilt mapping as read from it (``accel_tilt_param``)."""
+        return self._with(self.hover_thrust, tilt_from_gravity)
+
+    def _with(self, hover_thrust: float, tilt_from_gravity: bool) -> Encoder:
         return Encoder(
             self.output_mode, self.profile, self.target_system, self.target_component,
-            hover_thrust=self.hover_thrust, rate_law=self.rate_law, max_body_rate_rad_s=self.max_body_rate_rad_s,
+            hover_thrust=hover_thrust, rate_law=self.rate_law, max_body_rate_rad_s=self.max_body_rate_rad_s,
             tilt_from_gravity=tilt_from_gravity,
         )  # fmt: skip
 

@@ -76,6 +76,11 @@ class Profile:
     def name(self) -> str:
         return self.autopilot.value
 
+    @property
+    def params_bytewise(self) -> bool:
+        """PX4 packs an INT32 parameter's bytes into PARAM_VALUE's float; ArduPilot casts it."""
+        return self.autopilot is Autopilot.PX4
+
     def tilts_from_gravity(self, reported: float | None) -> bool:
         """Whether the autopilot tilts from g alone for acceleration setpoints, given the value it
         reported for :attr:`accel_tilt_param` (None, or anything but 0 / 1: its default)."""

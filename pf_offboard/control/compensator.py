@@ -251,14 +251,14 @@ class InnerLoopCompensator:
         gravity excluded): kept feasible by ``clip_thrust`` (a thrust vector, gravity included),
         recorded, and — when a group is held back — the :meth:`outgoing` one, feasible too."""
         g = GRAVITY_M_S2
-        fc = clip_thrust((setpoint[0], setpoint[1], setpoint[2] + g))
-        sent = (fc[0], fc[1], fc[2] - g)
+
+        def feasible(a: Vec) -> Vec:
+            fc = clip_thrust((a[0], a[1], a[2] + g))
+            return (fc[0], fc[1], fc[2] - g)
+
+        sent = feasible(setpoint)
         self.record(time_s, sent)
-        if self.holds:
-            o = self.outgoing(time_s)
-            fc = clip_thrust((o[0], o[1], o[2] + g))
-            sent = (fc[0], fc[1], fc[2] - g)
-        return sent
+        return feasible(self.outgoing(time_s)) if self.holds else sent
 
     def record(self, time_s: float, setpoint: Vec) -> None:
         """Remember the setpoint the law asked for at ``time_s`` (ENU acceleration, gravity

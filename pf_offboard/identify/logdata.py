@@ -342,7 +342,7 @@ def _tilts_from_gravity(raw: _Raw) -> bool:
     name = profile.accel_tilt_param
     if name is None or name not in raw.params:
         return profile.tilts_from_gravity(None)
-    return profile.tilts_from_gravity(param_value_decode(raw.params[name], raw.param_types.get(name, 9), profile is PX4))
+    return profile.tilts_from_gravity(param_value_decode(raw.params[name], raw.param_types.get(name, 9), profile.params_bytewise))
 
 
 def _setpoint_accel(

@@ -212,7 +212,7 @@ def _state_source_of(entries: Sequence[TlogEntry]) -> str:
     return "local_position"
 
 
-def _param_from_log(entries: Sequence[TlogEntry], param: str, bytewise: bool) -> float | None:
+def _param_from_log(entries: Sequence[TlogEntry], param: str, profile: Any) -> float | None:
     """The last value the vehicle reported for ``param`` (PARAM_VALUE), or None."""
     from pf_offboard.app.bridge import param_value_decode
 
@@ -222,7 +222,7 @@ def _param_from_log(entries: Sequence[TlogEntry], param: str, bytewise: bool) ->
             pid = e.message.param_id
             pid = pid.decode(errors="replace") if isinstance(pid, bytes) else pid
             if pid.rstrip("\x00") == param:
-                value = float(param_value_decode(e.message.param_value, e.message.param_type, bytewise))
+                value = float(param_value_decode(e.message.param_value, e.message.param_type, profile.params_bytewise))
     return value
 
 
@@ -230,12 +230,10 @@ def _tilt_from_gravity(entries: Sequence[TlogEntry], profile: Any, options: Repl
     """How the flight's acceleration setpoints were encoded: ``--tilt-from-gravity`` if given, else
     the autopilot's reported ``accel_tilt_param`` as fly read it, else the profile's default (as fly
     assumes without an answer)."""
-    from pf_offboard.app.profiles import Autopilot
-
     if options.tilt_from_gravity is not None:
         return options.tilt_from_gravity
     name = profile.accel_tilt_param
-    return bool(profile.tilts_from_gravity(None if name is None else _param_from_log(entries, name, profile.autopilot is Autopilot.PX4)))
+    return profile.tilts_from_gravity(None if name is None else _param_from_log(entries, name, profile))
 
 
 def build_pipeline(
@@ -250,7 +248,7 @@ def build_pipeline(
     from pf_offboard.app.estimator import Estimator
     from pf_offboard.app.fly import flight_settings
     from pf_offboard.app.pipeline import Pipeline
-    from pf_offboard.app.profiles import Autopilot, select_profile
+    from pf_offboard.app.profiles import select_profile
     from pf_offboard.control import controller_from_config
 
     first = _first_step_setpoint(entries, records)
@@ -269,10 +267,9 @@ def build_pipeline(
     flown_mode = _output_mode_of(first)
     if options.output_mode is None and flown_mode != output_mode:
         output_mode = flown_mode  # the flight overrode the config with --output
-    bytewise = profile.autopilot is Autopilot.PX4
     hover = options.hover_thrust if options.hover_thrust is not None else settings.hover_thrust
     if hover is None:
-        hover = _param_from_log(entries, profile.hover_thrust_param, bytewise)
+        hover = _param_from_log(entries, profile.hover_thrust_param, profile)
     if hover is None and output_mode != "acceleration":
         raise InputError("--hover-thrust", f"the log has no {profile.hover_thrust_param} value and the config none; pass --hover-thrust")
     if hover is not None and not (math.isfinite(hover) and 0.0 < hover < 1.0):

@@ -447,7 +447,7 @@ class SimFlight:
 
             pid = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
             pid = pid.rstrip("\x00")
-            value = param_value_decode(msg.param_value, msg.param_type, self.profile.name == "px4")
+            value = param_value_decode(msg.param_value, msg.param_type, self.profile.params_bytewise)
             if pid == self.profile.hover_thrust_param and self.settings.hover_thrust is None:
                 self.pipeline.encoder = self.pipeline.encoder.with_hover_thrust(float(value))
             elif pid == self.profile.accel_tilt_param and self.settings.output_mode == "acceleration":
