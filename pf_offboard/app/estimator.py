@@ -122,6 +122,43 @@ VELOCITY_CORRECTION_MAX_M_S = 1.0
 VELOCITY_CORRECTION_GAP_S = 0.5
 
 
+def velocity_correction_step(
+    correction: NDArray[np.float64],
+    dt_s: float,
+    tau_s: float,
+    position_step_m: NDArray[np.float64],
+    velocity_before_m_s: NDArray[np.float64],
+    velocity_m_s: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The velocity correction after one more sample (any one frame, m/s): a first-order low-pass
+    (time constant ``tau_s``) of Δposition / Δt − the two samples' mean velocity, each residual
+    bounded by VELOCITY_RESIDUAL_MAX_M_S and the result by VELOCITY_CORRECTION_MAX_M_S. Unchanged
+    when the samples are not 0 < ``dt_s`` <= VELOCITY_CORRECTION_GAP_S apart. One rule for the app's
+    :class:`Estimator` and for ``identify``, which fits the velocity the app flew on."""
+    if not 0.0 < dt_s <= VELOCITY_CORRECTION_GAP_S:
+        return correction
+    residual = position_step_m / dt_s - 0.5 * (velocity_m_s + velocity_before_m_s)
+    residual = np.clip(residual, -VELOCITY_RESIDUAL_MAX_M_S, VELOCITY_RESIDUAL_MAX_M_S)
+    out = correction + (1.0 - math.exp(-dt_s / tau_s)) * (residual - correction)
+    norm = float(np.linalg.norm(out))
+    return out * (VELOCITY_CORRECTION_MAX_M_S / norm) if norm > VELOCITY_CORRECTION_MAX_M_S else out
+
+
+def position_consistent_velocity(
+    time_s: NDArray[np.float64], position_m: NDArray[np.float64], velocity_m_s: NDArray[np.float64], tau_s: float
+) -> NDArray[np.float64]:
+    """A whole recorded series (N samples, any one frame) corrected as :class:`Estimator` corrects
+    it live: each velocity plus the correction after its own sample (zero at the first)."""
+    out = np.array(velocity_m_s, dtype=float, copy=True)
+    correction = np.zeros(out.shape[1])
+    for k in range(1, len(out)):
+        correction = velocity_correction_step(
+            correction, float(time_s[k] - time_s[k - 1]), tau_s, position_m[k] - position_m[k - 1], velocity_m_s[k - 1], velocity_m_s[k]
+        )
+        out[k] += correction
+    return out
+
+
 class _Clock:
     """Sample-time acceptance of one stream (see the module docstring). Pure."""
 
@@ -217,15 +254,7 @@ class Estimator:
         prev, self._vc_last = self._vc_last, (time_s, pos_ned, vel_ned)
         skip, self._vc_skip = self._vc_skip, False
         if prev is not None and verdict == NEW and not skip:
-            dt = time_s - prev[0]
-            if 0.0 < dt <= VELOCITY_CORRECTION_GAP_S:
-                residual = (pos_ned - prev[1]) / dt - 0.5 * (vel_ned + prev[2])
-                residual = np.clip(residual, -VELOCITY_RESIDUAL_MAX_M_S, VELOCITY_RESIDUAL_MAX_M_S)
-                bias = self._vc_bias_ned + (1.0 - math.exp(-dt / tau)) * (residual - self._vc_bias_ned)
-                norm = float(np.linalg.norm(bias))
-                if norm > VELOCITY_CORRECTION_MAX_M_S:
-                    bias = bias * (VELOCITY_CORRECTION_MAX_M_S / norm)
-                self._vc_bias_ned = bias
+            self._vc_bias_ned = velocity_correction_step(self._vc_bias_ned, time_s - prev[0], tau, pos_ned - prev[1], prev[2], vel_ned)
         return vel_ned + self._vc_bias_ned
 
     def on_message(self, msg: Any) -> bool:

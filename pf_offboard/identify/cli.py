@@ -19,6 +19,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write FILE with the identified vehicle: section (FILE or --config as the base, other sections kept)")  # fmt: skip
     parser.add_argument("--hover-thrust", type=float, metavar="H",
                         help="normalised hover thrust the app used for attitude/rates setpoints (default: the log's config, else its parameter)")  # fmt: skip
+    parser.add_argument("--velocity-correction", type=float, metavar="S",
+                        help="fit the velocity made consistent with the position's derivative (time constant S s, as "
+                             "flight.velocity_correction_s); for path-following logs of an estimator whose velocity drifts "
+                             "from its position, e.g. PX4 SIH; not for hover excitations (default: as reported; docs/identify.md)")  # fmt: skip
     fly = parser.add_argument_group("excitation flight (--connect)")
     fly.add_argument("--connect", metavar="ENDPOINT", help="fly a 10-20 s excitation at hover first (like fly --connect), then fit its log")
     fly.add_argument("--config", metavar="YAML", help="with --connect: flight settings (output mode, rate); base of --write-config")
@@ -49,12 +53,19 @@ def run(args: argparse.Namespace) -> int:
 
     if args.hover_thrust is not None and not (math.isfinite(args.hover_thrust) and 0.05 <= args.hover_thrust <= 0.95):
         raise InputError("--hover-thrust", f"must be in [0.05, 0.95], got {args.hover_thrust}")
+    correction = args.velocity_correction
+    if correction is not None and not (math.isfinite(correction) and 0.05 <= correction <= 60.0):
+        raise InputError("--velocity-correction", f"must be in [0.05, 60] s (flight.velocity_correction_s's range), got {correction}")
     logs = [Path(p) for p in args.logs]
     if args.connect:
         if logs:
             raise InputError("LOG", "give either logs to fit or --connect (which records its own), not both")
         if not args.config:
             raise InputError("--config", "--connect needs --config (output mode, setpoint rate)")
+        if correction is not None:
+            # at hover the position's own wander is most of what the correction adds: the real PX4
+            # SIH's excitations fitted a drag of -0.35 / 0.11 with it, 0.40 / 0.44 without (docs/identify.md)
+            raise InputError("--velocity-correction", "is for path-following logs, not the hover excitation --connect flies")
         from pf_offboard.identify.excite import ExcitationSpec, excite
 
         spec = ExcitationSpec(
@@ -69,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         logs = [outcome.tlog]
     elif not logs:
         raise InputError("LOG", "give at least one .tlog to fit, or --connect to fly an excitation")
-    data = [load_log(p, hover_thrust=args.hover_thrust) for p in logs]
+    data = [load_log(p, hover_thrust=args.hover_thrust, velocity_correction_s=correction) for p in logs]
     name = str(logs[0]) if len(logs) == 1 else f"{len(logs)} logs"
     ident = identify([s for d in data for s in d.segments], source=name)
     if args.json:

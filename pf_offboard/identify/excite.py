@@ -212,8 +212,11 @@ class ExcitationFollower:
             out[axis] = self.signal.value(axis, k, t, self._signs[(axis, k)])
         return out
 
-    def update(self, position: ArrayLike, velocity: ArrayLike) -> Command:
-        """Acceleration = hold + excitation (clipped); attitude and thrust from it (ENU, FLU)."""
+    def update(self, position: ArrayLike, velocity: ArrayLike, time_s: float | None = None) -> Command:
+        """Acceleration = hold + excitation (clipped); attitude and thrust from it (ENU, FLU).
+
+        ``time_s`` is accepted as a compensated follower's is (a pipeline built for one passes the
+        sample time) and not used: the excitation runs on the vehicle clock it was given."""
         p = np.asarray(position, dtype=float)
         v = np.asarray(velocity, dtype=float)
         if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v))):

@@ -21,6 +21,14 @@ body rates + thrust), sent while the autopilot's latest HEARTBEAT said armed and
 (PX4 OFFBOARD / ArduPilot GUIDED). Take-off position setpoints and anything before the mode switch
 are left out. A grid sample is used when its setpoint is at most ``MAX_SETPOINT_AGE_S`` old.
 
+Velocity: LOCAL_POSITION_NED's velocity as reported, or (``velocity_correction_s``) made consistent
+with the position's derivative as the app's :class:`~pf_offboard.app.estimator.Estimator` does in
+flight. Which is better depends on where the estimate errs (docs/identify.md, *Velocity*): on PX4
+SIH in path flight EKF2's velocity drifts 10-40 cm/s off its position's derivative, below 1 Hz where
+drag acts, and the correction brings the mock's ``px4-sih`` drag from 0.79-0.98 to 0.92-1.08 for its
+1.0 (20 s path logs, eight seeds); at hover the position's own wander dominates and the correction
+made the real PX4 SIH's excitation fits worse. So it is asked for, not the default.
+
 Frames: velocities and accelerations are converted to world ENU, attitudes to body FLU → ENU,
 through :mod:`pf_offboard.frames`; body rates stay body FRD (only their magnitude response is fitted).
 """
@@ -38,6 +46,7 @@ from numpy.typing import NDArray
 
 from pf_offboard import frames
 from pf_offboard.app.encoders import flown_when_tilting_from_gravity
+from pf_offboard.app.estimator import position_consistent_velocity
 from pf_offboard.control.types import GRAVITY_M_S2
 from pf_offboard.errors import InputError
 
@@ -67,7 +76,8 @@ class Segment:
     ``accel_sp_enu_m_s2``: the acceleration the app asked for (world ENU, gravity excluded),
     held from each setpoint to the next; for attitude setpoints ``T·z_b(q_sp) − g·e_z`` with
     ``T = thrust / hover_thrust · 9.81``; for body-rate setpoints the same with the *measured*
-    attitude. ``velocity_enu_m_s``: LOCAL_POSITION_NED velocity, linearly interpolated.
+    attitude. ``velocity_enu_m_s``: LOCAL_POSITION_NED velocity (position-consistent when asked,
+    see the module docstring), linearly interpolated.
     ``rates_sp_frd_rad_s`` / ``rates_frd_rad_s``: body-rate setpoints and ATTITUDE_QUATERNION
     rates (rates-mode logs only, else None).
     """
@@ -96,6 +106,7 @@ class LogData:
     hover_thrust: float | None  # used to turn attitude / rates thrust into acceleration
     hover_thrust_source: str  # "--hover-thrust", "config", "MPC_THR_HOVER", ... or "" (not needed)
     clock_slope: float  # UNIX seconds per boot-clock second (1.0 for a real-time SITL)
+    velocity_correction_s: float | None = None  # the velocity fitted was made position-consistent (s); None: as reported
 
     @property
     def duration_s(self) -> float:
@@ -107,6 +118,7 @@ class _Raw:
     lpn_t: list[float]
     lpn_unix: list[float]
     lpn_v_ned: list[tuple[float, float, float]]
+    lpn_p_ned: list[tuple[float, float, float]]
     att_t: list[float]
     att_q_ned_frd: list[tuple[float, float, float, float]]
     att_rates_frd: list[tuple[float, float, float]]
@@ -136,7 +148,7 @@ def _heartbeat_active(msg: Any) -> bool:
 def _read_raw(path: Path) -> _Raw:
     from pf_offboard.logs.tlog import iter_tlog
 
-    raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], {}, None)
+    raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], {}, None)
     last_lpn_t = -math.inf
     for entry in iter_tlog(path):
         msg = entry.message
@@ -145,11 +157,13 @@ def _read_raw(path: Path) -> _Raw:
             if kind == "LOCAL_POSITION_NED":
                 t = msg.time_boot_ms * 1e-3
                 v = (msg.vx, msg.vy, msg.vz)
-                if t > last_lpn_t and all(map(math.isfinite, v)):  # drop duplicated / reordered samples
+                pos = (msg.x, msg.y, msg.z)
+                if t > last_lpn_t and all(map(math.isfinite, v + pos)):  # drop duplicated / reordered samples
                     last_lpn_t = t
                     raw.lpn_t.append(t)
                     raw.lpn_unix.append(entry.time_unix_s)
                     raw.lpn_v_ned.append(v)
+                    raw.lpn_p_ned.append(pos)
             elif kind == "ATTITUDE_QUATERNION":
                 q = (msg.q1, msg.q2, msg.q3, msg.q4)
                 r = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
@@ -262,14 +276,18 @@ def _hold_index(times: NDArray[np.float64], at: NDArray[np.float64]) -> NDArray[
 
 
 def load_log(
-    path: str | Path, hover_thrust: float | None = None, grid_dt_s: float | None = None
+    path: str | Path,
+    hover_thrust: float | None = None,
+    grid_dt_s: float | None = None,
+    velocity_correction_s: float | None = None,
 ) -> LogData:
     """Read one ``.tlog`` / ``.tlog.gz`` into active segments (see the module docstring).
 
     ``hover_thrust``: the normalised hover thrust the app used for attitude / rates setpoints
     (default: the log's sibling config ``flight.hover_thrust``, else the autopilot's parameter
     recorded in the log). ``grid_dt_s``: resampling step (default: the telemetry period, at most
-    10 ms). Raises :class:`InputError` naming the file for anything unusable.
+    10 ms). ``velocity_correction_s``: fit the velocity made position-consistent with this time
+    constant (module docstring; default None: as reported). Raises :class:`InputError` naming the file for anything unusable.
     """
     p = Path(path)
     name = str(p)
@@ -312,6 +330,8 @@ def load_log(
     j = np.clip(np.searchsorted(lpn_t, grid), 1, len(lpn_t) - 1)
     valid &= (lpn_t[j] - lpn_t[j - 1]) <= max(5.0 * period, 0.1)
     v_ned = np.asarray(raw.lpn_v_ned)
+    if velocity_correction_s is not None:
+        v_ned = position_consistent_velocity(lpn_t, np.asarray(raw.lpn_p_ned), v_ned, velocity_correction_s)
     velocity = np.column_stack([np.interp(grid, lpn_t, v_ned[:, k]) for k in range(3)])
     velocity_enu = np.array([frames.ned_to_enu(v) for v in velocity])
     accel_enu, rates_sp, rates = _setpoint_accel(raw, kind, hover, safe, grid)
@@ -329,7 +349,7 @@ def load_log(
         ))  # fmt: skip
     if not segments:
         raise InputError(name, f"no stretch of at least {MIN_SEGMENT_S:g} s where {kind} setpoints were flying (armed, in OFFBOARD/GUIDED)")
-    return LogData(name, kind, tuple(segments), hover, hover_src, slope)
+    return LogData(name, kind, tuple(segments), hover, hover_src, slope, velocity_correction_s)
 
 
 def _tilts_from_gravity(raw: _Raw) -> bool:

@@ -20,7 +20,9 @@ def report_lines(ident: Identification, logs: Sequence[LogData]) -> list[str]:
     lines = []
     for log in logs:
         hover = f", hover thrust {log.hover_thrust:g} ({log.hover_thrust_source})" if log.hover_thrust is not None else ""
-        lines.append(f"{log.source}: {log.kind} setpoints, {len(log.segments)} active stretch(es), {log.duration_s:.1f} s{hover}")
+        vc = log.velocity_correction_s
+        velocity = f"velocity made position-consistent ({vc:g} s)" if vc is not None else "velocity as reported"
+        lines.append(f"{log.source}: {log.kind} setpoints, {len(log.segments)} active stretch(es), {log.duration_s:.1f} s{hover}; {velocity}")
     lines.append(f"fitted on {ident.duration_s:.1f} s of active flight (model: dv/dt = gain * delay(lag(a_sp)) - drag * v + c, world frame)")
     lines.append("axis  lag s   delay s  rise63 s  gain    drag 1/s  bias m/s^2          R^2    NRMSE  samples  excitation m/s^2")
     for f in (ident.xy, ident.z):
@@ -65,7 +67,8 @@ def as_json(ident: Identification, logs: Sequence[LogData]) -> str:
     out = {
         "logs": [
             {"path": log.source, "setpoints": log.kind, "active_s": log.duration_s, "segments": len(log.segments),
-             "hover_thrust": log.hover_thrust, "hover_thrust_source": log.hover_thrust_source}
+             "hover_thrust": log.hover_thrust, "hover_thrust_source": log.hover_thrust_source,
+             "velocity_correction_s": log.velocity_correction_s}
             for log in logs
         ],  # fmt: skip
         "duration_s": ident.duration_s,

@@ -247,3 +247,25 @@ def test_velocity_correction_ignores_a_confirmed_position_jump() -> None:
 def test_velocity_correction_time_constant_is_validated(bad: float) -> None:
     with pytest.raises(ValueError, match="velocity_correction_s"):
         Estimator("local_position", velocity_correction_s=bad)
+
+
+def test_a_recorded_series_is_corrected_as_the_live_estimator_corrects_it() -> None:
+    """identify's position_consistent_velocity and the Estimator share one rule: the same samples
+    give the same velocities, to float rounding (biased circle with position noise, 10 s)."""
+    from pf_offboard.app.estimator import position_consistent_velocity
+
+    est = Estimator("local_position", velocity_correction_s=0.3)
+    rng = np.random.default_rng(5)
+    times, pos, vel, live = [], [], [], []
+    for i in range(1000):
+        t = i / 100.0
+        p = np.array([2.0 * math.cos(0.75 * t), 2.0 * math.sin(0.75 * t), -2.0]) + rng.normal(0.0, 0.005, 3)
+        v = np.array([-1.5 * math.sin(0.75 * t) + 0.3, 1.5 * math.cos(0.75 * t) - 0.2, 0.1])
+        assert est.on_message(local_position(1000 + 10 * i, tuple(p), tuple(v)))
+        times.append(1.0 + 0.01 * i)
+        pos.append(p)
+        vel.append(v)
+        live.append(frames.enu_to_ned(est.latest.velocity_enu_m_s))
+    series = position_consistent_velocity(np.array(times), np.array(pos), np.array(vel), 0.3)
+    assert np.abs(series - np.array(live)).max() < 1e-9
+    assert np.abs(series[-1] - (vel[-1] - np.array([0.3, -0.2, 0.1]))).max() < 0.03  # and it corrects

@@ -63,6 +63,7 @@ def write_tlog(
     drag = np.array([truth.drag_xy_1_s, truth.drag_xy_1_s, truth.drag_z_1_s])
     bias = np.array(truth.bias_enu_m_s2)
     v = np.zeros(3)
+    p = np.array([0.0, 0.0, 5.0])  # ENU: the position integrates the velocity, as an estimator's does
     u = np.zeros(3)  # lag state
     step = np.zeros(3)
     next_change = np.zeros(3)
@@ -81,8 +82,8 @@ def write_tlog(
             if k % int(round(rate_hz / 10)) == 0:  # 10 Hz heartbeat
                 mode = PX4_OFFBOARD if t >= offboard_from_s else (4 << 16)
                 send(ap, mavlink.MAVLink_heartbeat_message(2, 12, 128 | 1, mode, 4, 3), t)
-            v_ned = frames.enu_to_ned(v)
-            send(ap, mavlink.MAVLink_local_position_ned_message(int(round(t * 1000)), 0.0, 0.0, -5.0, *map(float, v_ned)), t)
+            v_ned, p_ned = frames.enu_to_ned(v), frames.enu_to_ned(p)
+            send(ap, mavlink.MAVLink_local_position_ned_message(int(round(t * 1000)), *map(float, p_ned), *map(float, v_ned)), t)
             for j in range(3):
                 if t >= next_change[j]:
                     step[j] = amplitude_m_s2 * rng.uniform(-1.0, 1.0)
@@ -100,5 +101,6 @@ def write_tlog(
                 history = history[-(delay_steps + 2):]
                 alpha = np.where(lag > 0, 1.0 - np.exp(-1e-3 / np.maximum(lag, 1e-9)), 1.0)
                 u = u + alpha * (delayed - u)
+                p = p + 1e-3 * v
                 v = v + 1e-3 * (gain * u - drag * v + bias)
     return path

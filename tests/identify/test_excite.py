@@ -105,3 +105,19 @@ def test_bad_specs_are_input_errors() -> None:
         ExcitationSpec(duration_s=600.0)
     with pytest.raises(InputError, match="--max-tilt"):
         ExcitationSpec(max_tilt_deg=math.nan)
+
+
+def test_a_timed_pipeline_call_flies_the_same_excitation() -> None:
+    """A Pipeline built for a compensated follower (configs/px4-sih.yaml) passes each sample's
+    time; the excitation runs on its own clock, so the commands are the same (simulate_excitation
+    with that config failed on the keyword before)."""
+    spec = ExcitationSpec(seed=2)
+    plain, clock_a = _follower(spec)
+    timed, clock_b = _follower(spec)
+    for k in range(800):
+        p, v = np.array([1.0, 2.0, 3.0 + 0.01 * math.sin(0.1 * k)]), np.zeros(3)
+        a = plain.update(p, v)
+        b = timed.update(p, v, time_s=clock_b.t)
+        assert a.acceleration == pytest.approx(b.acceleration, abs=0.0)
+        clock_a.t += 0.01
+        clock_b.t += 0.01

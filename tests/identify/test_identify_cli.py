@@ -156,6 +156,26 @@ def test_bad_flags(tmp_path, good_log, capsys) -> None:
     assert "--hover-thrust" in _error(capsys)
     assert main(["identify", "--connect", "udpout:127.0.0.1:9", "--config", "configs/paper.yaml", "--box", "50"]) == 2
     assert "--box" in _error(capsys)
+    assert main(["identify", "--connect", "udpout:127.0.0.1:9", "--config", "configs/paper.yaml", "--velocity-correction", "0.3"]) == 2
+    assert "not the hover excitation" in _error(capsys)
+    for bad in ("0", "nan", "100"):
+        assert main(["identify", str(good_log), "--velocity-correction", bad]) == 2
+        assert "--velocity-correction" in _error(capsys)
+
+
+def test_velocity_correction_is_reported_and_harmless_on_a_consistent_estimate(good_log, capsys) -> None:
+    """The synthetic log's position integrates its velocity (an estimate without the drift the
+    correction removes): the fit is the same, and the JSON says which velocity was fitted."""
+    assert main(["identify", str(good_log), "--json"]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert main(["identify", str(good_log), "--json", "--velocity-correction", "0.3"]) == 0
+    corrected = json.loads(capsys.readouterr().out)
+    assert plain["logs"][0]["velocity_correction_s"] is None and corrected["logs"][0]["velocity_correction_s"] == 0.3
+    for group in ("xy", "z"):
+        assert corrected[group]["gain"] == pytest.approx(plain[group]["gain"], rel=0.01)
+        assert corrected[group]["drag_1_s"] == pytest.approx(plain[group]["drag_1_s"], rel=0.02)
+    assert main(["identify", str(good_log), "--velocity-correction", "0.3"]) == 0
+    assert "velocity made position-consistent (0.3 s)" in capsys.readouterr().out
 
 
 def test_unwritable_config_target(good_log, tmp_path, capsys) -> None:

@@ -108,3 +108,45 @@ def test_wrong_hover_thrust_parameter_is_recovered_as_gain(tmp_path, truth) -> N
     assert ident.z.bias_m_s2[0] == pytest.approx((expected - 1.0) * 9.80665, abs=0.1)
     for f in (ident.xy, ident.z):
         assert f.drag_1_s == pytest.approx(truth["drag_1_s"], rel=0.10)
+
+
+# ------------------------------------------------------------------- the noisy px4-sih preset
+# The realistic default preset reports an EKF2-like estimate: a velocity error its position does
+# not share (bias std 0.2 m/s drifting over 4 s, as EKF2 on PX4 SIH in flight) sits below 1 Hz,
+# where drag acts. Fitted as reported, 20 s path logs give a low drag; with the velocity made
+# position-consistent (identify --velocity-correction, the app's own flight.velocity_correction_s
+# rule) gain and drag come within 10 %. Eight seeds measured (docs/identify.md, *Velocity*): xy gain
+# 0.96-1.06, drag 0.92-1.08 (as reported 0.79-0.98), xy rise -6 ... +21 % of the truth.
+SIH = "px4-sih"
+
+
+@pytest.fixture(scope="module")
+def sih_path_logs(tmp_path_factory) -> list[Path]:
+    from pf_offboard.sim import simulate
+
+    logs = []
+    for seed in (1, 2, 3):
+        out = tmp_path_factory.mktemp(f"sih-path-{seed}")
+        spec = SimSpec(vehicle=SIH, duration_s=20.0, seed=seed, epoch_unix_s=1.7e9)
+        logs.append(simulate(REPO / "configs" / "px4-sih.yaml", spec, out).paths.tlog)
+    return logs
+
+
+def test_path_logs_of_the_noisy_preset_fit_within_10_percent_with_the_position_consistent_velocity(sih_path_logs) -> None:
+    params = preset(SIH)
+    assert params.estimator.enabled and params.estimator.velocity_bias_std_xy_m_s > 0.0  # the noise is on
+    rise_xy = accel_step_rise_time_s(params, (1.0, 0.0, 0.0))
+    raw_err, corrected_err = [], []
+    for tlog in sih_path_logs:
+        fit = identify(load_log(tlog, velocity_correction_s=0.3).segments)
+        raw = identify(load_log(tlog).segments)
+        print(f"\n{tlog.parent.name}: xy rise {fit.xy.rise_63_s:.3f} (truth {rise_xy:.3f}) gain {fit.xy.gain:.3f} drag {fit.xy.drag_1_s:.3f}"
+              f" (as reported {raw.xy.drag_1_s:.3f}); z gain {fit.z.gain:.3f} drag {fit.z.drag_1_s:.3f}")  # fmt: skip
+        for f in (fit.xy, fit.z):
+            assert f.gain == pytest.approx(1.0, rel=0.10)
+            assert f.drag_1_s == pytest.approx(params.drag_1_s, rel=0.10)
+        assert fit.xy.rise_63_s == pytest.approx(rise_xy, rel=0.25)
+        raw_err.append(abs(raw.xy.drag_1_s - params.drag_1_s))
+        corrected_err.append(abs(fit.xy.drag_1_s - params.drag_1_s))
+    # the correction is what gets there: as reported, the drag is off by several times as much
+    assert sum(corrected_err) < 0.5 * sum(raw_err)
