@@ -25,7 +25,7 @@ Velocity: LOCAL_POSITION_NED's velocity as reported, or (``velocity_correction_s
 with the position's derivative as the app's :class:`~pf_offboard.app.estimator.Estimator` does in
 flight. Which is better depends on where the estimate errs (docs/identify.md, *Velocity*): on PX4
 SIH in path flight EKF2's velocity drifts 10-40 cm/s off its position's derivative, below 1 Hz where
-drag acts, and the correction brings the mock's ``px4-sih`` drag from 0.79-0.98 to 0.92-1.08 for its
+drag acts, and the correction brings the mock's ``px4-sih`` drag from 0.82-0.95 to 0.92-1.03 for its
 1.0 (20 s path logs, eight seeds); at hover the position's own wander dominates and the correction
 made the real PX4 SIH's excitation fits worse. So it is asked for, not the default.
 

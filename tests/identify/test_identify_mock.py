@@ -115,8 +115,11 @@ def test_wrong_hover_thrust_parameter_is_recovered_as_gain(tmp_path, truth) -> N
 # not share (bias std 0.2 m/s drifting over 4 s, as EKF2 on PX4 SIH in flight) sits below 1 Hz,
 # where drag acts. Fitted as reported, 20 s path logs give a low drag; with the velocity made
 # position-consistent (identify --velocity-correction, the app's own flight.velocity_correction_s
-# rule) gain and drag come within 10 %. Eight seeds measured (docs/identify.md, *Velocity*): xy gain
-# 0.96-1.06, drag 0.92-1.08 (as reported 0.79-0.98), xy rise -6 ... +21 % of the truth.
+# rule) gain and drag come within 10 %. Eight seeds measured (docs/identify.md, *Velocity*): xy rise
+# 0.234-0.250 s (truth 0.238), gain 0.97-1.02, drag 0.92-1.03 (as reported 0.82-0.95), z gain
+# 1.00-1.04, drag 0.99-1.06. The vertical rise comes out 0.12-0.14 s against the 1 m/s^2 step's
+# 0.095 s, noise-free too (0.114 s from an excitation): this preset's vertical response is not a
+# first-order lag, so it is not asserted here.
 SIH = "px4-sih"
 
 
@@ -145,7 +148,7 @@ def test_path_logs_of_the_noisy_preset_fit_within_10_percent_with_the_position_c
         for f in (fit.xy, fit.z):
             assert f.gain == pytest.approx(1.0, rel=0.10)
             assert f.drag_1_s == pytest.approx(params.drag_1_s, rel=0.10)
-        assert fit.xy.rise_63_s == pytest.approx(rise_xy, rel=0.25)
+        assert fit.xy.rise_63_s == pytest.approx(rise_xy, rel=0.10)
         raw_err.append(abs(raw.xy.drag_1_s - params.drag_1_s))
         corrected_err.append(abs(fit.xy.drag_1_s - params.drag_1_s))
     # the correction is what gets there: as reported, the drag is off by several times as much

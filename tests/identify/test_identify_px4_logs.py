@@ -6,7 +6,7 @@ end: about 23 s of path following each). The flights are the paper path at 1.5 m
 excitation: the setpoints are what path following asked for.
 
 Tolerances (measurements, not goldens): fitting each flight's first and second half separately
-moves the xy 63 % rise by up to 0.004 s and the drags by up to 0.12 1/s (see docs/identify.md), so
+moves the xy 63 % rise by up to 0.010 s and the drags by up to 0.08 1/s (see docs/identify.md), so
 two flights of the same vehicle must agree within 0.03 s (xy rise) and 0.15 1/s (drags). The
 plausibility bounds are the vehicle's: SIH's linear drag is 1.0 1/s, PX4's horizontal
 acceleration follows a setpoint with about 0.19 s lag (shared/notes/px4-sitl.md).
@@ -108,7 +108,8 @@ def test_the_default_excitation_on_px4_sih_is_too_uncertain_to_write(tmp_path, c
     assert section.startswith("# do not fly this section: fit too uncertain to fly (xy R^2 0.65")
     import yaml
 
-    assert yaml.safe_load(section)["vehicle"]["accel_delay_s"] == 0.202
+    _, ident = _fit("excitation-default")
+    assert yaml.safe_load(section)["vehicle"]["accel_delay_s"] == round(ident.xy.delay_s, 3) > 0.0
 
 
 def test_the_stronger_excitation_on_px4_sih_is_written(tmp_path, capsys) -> None:
