@@ -6,7 +6,8 @@ the disturbance observer at 4 rad/s and gives the speed loop a 30° margin (2.76
 8 rad/s and 40° (1.47 Hz) passed more of the noise on. `rates` output, the preset's hardest mode,
 two laps from activation + 8 s as issue 8 measures.
 
-Measured (seed 1): shipped 4.2 cm/s speed error RMS at 2.5 cm, earlier 5.8 cm/s at 2.3 cm. On the
+Measured (seed 1): shipped 3.6 cm/s speed error RMS at 2.3 cm, earlier 4.4 cm/s at 2.3 cm (with the
+hand-set vehicle section before the identified one: 4.2 cm/s at 2.5 cm against 5.8 at 2.3). On the
 real PX4 SIH (five laps, alternating flights the same day) the shipped settings flew 0.4-0.6 cm/s
 less than the earlier ones in every output mode (docs/controller.md, *The floor*).
 """

@@ -7,7 +7,8 @@ much later, so the law sees the state at one instant. This flies ``px4-sih.yaml`
 vertical group (delay 0.03 s, lag 0.04 s) on the calibrated ``px4-sih`` preset, `acceleration`
 output, two laps from activation + 8 s as issue 8 measures, against the same config without it.
 
-Measured (seed 1): 2.5 cm, 4.6 cm/s against 2.3 cm, 3.8 cm/s with one delay. Predicting each
+Measured (seed 1): 2.4 cm, 4.4 cm/s against 2.2 cm, 3.3 cm/s with one delay (the hand-set section
+before: 2.5 cm, 4.6 cm/s against 2.3 cm, 3.8 cm/s). Predicting each
 group over its own delay, as the compensator did before, flew the same model at 8.1 cm, 11.0 cm/s
 (the real PX4 SIH, five laps: 8.1 cm, 11.4 cm/s; now 4.3 cm, 5.9 cm/s; docs/identify.md).
 """

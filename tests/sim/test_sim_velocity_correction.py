@@ -6,8 +6,8 @@ SIH's ground truth. The shipped `configs/px4-sih.yaml` (acceleration output, vel
 0.3 s) on the paper path at 1.5 m/s, 3 laps, measured from activation + 8 s as on the real SITL:
 once as shipped, once with `flight.velocity_correction_s: null`, once with the earlier 0.5 s.
 
-Measured (seed 1, 3 laps): corrected 2.6 cm cross-track RMS, 0.5 s 3.1 cm, uncorrected
-11.6 cm. The real PX4 SIH: 0.3 s 3.5-4.2 cm in every output mode, 0.5 s 3.9-5.3 cm,
+Measured (seed 1, 3 laps): corrected 2.3 cm cross-track RMS, 0.5 s 2.9 cm, uncorrected
+11.2 cm. The real PX4 SIH: 0.3 s 3.5-4.2 cm in every output mode, 0.5 s 3.9-5.3 cm,
 uncorrected 10.9-17.7 cm.
 """
 
