@@ -10,10 +10,10 @@ over the flight (a hover-thrust error, a steady wind's drag). Method:
 1. For a candidate (lag, delay), ``u`` is computed from the held setpoint (fractional delay by
    linear interpolation, the lag by its exact zero-order-hold discretisation, started in steady
    state at the segment's first setpoint; the first ``BURN_IN_S`` of each segment only warm up).
-2. **Integral equation error** on short windows [t0, t0 + W] (W = ``WINDOW_S``, 0.2 s): ``v(t0+W) − v(t0) = gain·∫u −
-   drag·∫v + c·W`` is linear in (gain, drag, c) and solved by least squares. Integrating, instead of
-   differentiating, the measured velocity keeps the velocity noise out of the regressors' slopes
-   (an EKF velocity differentiated at 100 Hz is mostly noise).
+2. **Integral equation error** on short windows [t0, t0 + W] (W = ``WINDOW_S``, 0.2 s):
+   ``v(t0+W) − v(t0) = gain·∫u − drag·∫v + c·W`` is linear in (gain, drag, c) and solved by least
+   squares. Integrating, instead of differentiating, the measured velocity keeps the velocity noise
+   out of the regressors' slopes (an EKF velocity differentiated at 100 Hz is mostly noise).
 3. (lag, delay) per group by grid search (coarse, then fine around the best). VehicleModel has one
    delay: it gets the smaller of the two, and the other group's excess delay is added to its lag,
    which keeps each group's 63 % rise time (delay + lag) — the figure a step response measures.
@@ -117,7 +117,7 @@ class Identification:
 
     def unflyable(self) -> str:
         """Why this fit should not be flown ("" if it may): a group below FLYABLE_R2."""
-        poor = [f"{f.group} R^2 {f.r2:.2f}" for f in (self.xy, self.z) if f.r2 < FLYABLE_R2]
+        poor = [f"{f.group} R^2 {f.r2:.2f}" for f in (self.xy, self.z) if not f.r2 >= FLYABLE_R2]  # NaN: not measured, poor
         if not poor:
             return ""
         return f"fit too uncertain to fly ({', '.join(poor)} < {FLYABLE_R2:g}); {STRONGER_EXCITATION}"
@@ -396,6 +396,6 @@ def identify(segments: Sequence[Segment], source: str = "log") -> Identification
             notes.append(f"{f.group}: fitted drag {f.drag_1_s:.3f} 1/s < 0 (not resolved by this flight); written as 0")
         if not 0.2 <= f.gain <= 5.0:
             raise InputError(source, f"{f.group}: fitted gain {f.gain:.3f} is not physical (expected about 1): setpoints and response do not match (wrong hover thrust? not the log of the vehicle flown?)")
-        if f.r2 < FLYABLE_R2:
+        if not f.r2 >= FLYABLE_R2:
             notes.append(f"{f.group}: poor fit (R^2 {f.r2:.2f} < {FLYABLE_R2:g}): too uncertain to fly; {STRONGER_EXCITATION}")
     return Identification(fits["xy"], fits["z"], fit_rate_loop(segs), total, tuple(notes))

@@ -154,3 +154,18 @@ def test_an_autopilot_tilting_from_gravity_is_fitted_through_its_mapping(tmp_pat
             out.write(e.message.get_msgbuf(), e.time_unix_s)
     wrong = identify(load_log(misread).segments).xy
     assert 1.0 - wrong.r2 > 5.0 * (1.0 - xy.r2)
+
+
+def test_a_fit_without_quality_windows_is_not_flyable() -> None:
+    """R^2 is measured over 0.6 s windows; active stretches too short for any (1.0-1.2 s, each
+    with 0.6 s of filter warm-up) leave it unmeasured (NaN), which the gate treats as poor."""
+    import dataclasses
+    import math
+
+    from pf_offboard.identify.fit import AxisFit, Identification
+
+    good = AxisFit("xy", 0.1, 0.1, 1.0, 0.5, (0.0, 0.0), 0.99, 0.1, 1000, 1.0)
+    unmeasured = dataclasses.replace(good, group="z", bias_m_s2=(0.0,), r2=math.nan)
+    ident = Identification(good, unmeasured, None, 10.0, ())
+    assert "z R^2 nan" in ident.unflyable()
+    assert Identification(good, dataclasses.replace(unmeasured, r2=0.9), None, 10.0, ()).unflyable() == ""
