@@ -102,6 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--blackout", metavar="T0,T1", help="send nothing for T0 <= t < T1")
     f.add_argument("--windows-from-offboard", action="store_true",
                    help="--blackout times count from the first entry into OFFBOARD / GUIDED, not from boot")
+    f.add_argument("--loss-from-offboard", action="store_true",
+                   help="--loss only from the first entry into OFFBOARD / GUIDED (connecting is not under test)")
     f.add_argument("--estimator-reset", metavar="T[,dx,dy,dz]",
                    help="position estimate jumps by (dx,dy,dz) NED m at T (default 2,-1,0); reset_counter+1")
     f.add_argument("--takeover", metavar="T[,MODE]",
@@ -149,6 +151,8 @@ def config_from_args(args: argparse.Namespace) -> MockConfig:
         changes["blackout_s"] = (t0, t1)
     if args.windows_from_offboard:
         changes["windows_from_offboard"] = True
+    if args.loss_from_offboard:
+        changes["loss_from_offboard"] = True
     if args.estimator_reset:
         values = _floats(args.estimator_reset, None, "--estimator-reset")
         if len(values) not in (1, 4):
@@ -255,6 +259,8 @@ def config_to_args(config: MockConfig) -> list[str]:
         args += ["--blackout", ",".join(repr(v) for v in f.blackout_s)]
     if f.windows_from_offboard:
         args.append("--windows-from-offboard")
+    if f.loss_from_offboard:
+        args.append("--loss-from-offboard")
     if f.estimator_reset_at_s is not None:
         args += ["--estimator-reset", ",".join(repr(v) for v in (f.estimator_reset_at_s, *f.estimator_reset_ned_m))]
     if f.takeover_at_s is not None:

@@ -137,6 +137,10 @@ class FaultConfig:
     # blackout_s / heartbeat_mute_s count from the first entry into OFFBOARD / GUIDED instead of
     # boot (a test's fault then falls inside the flight however long the client took to start)
     windows_from_offboard: bool = False
+    # loss only from the first entry into OFFBOARD / GUIDED: a test of the flight through a lossy link
+    # whose connection and mode switch are not the case under test (through 40 % loss both ways they
+    # can take longer than the app's 5 s command timeout, and the test would fail before its fault)
+    loss_from_offboard: bool = False
     # the autopilot's clock jumps: from clock_jump_at_s on, every time_boot_ms / time_usec it sends
     # is off by clock_jump_s (forward or back: a reboot, a clock reset); the vehicle does not move
     clock_jump_at_s: float | None = None

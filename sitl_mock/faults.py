@@ -28,11 +28,17 @@ class FaultInjector:
         self._held: dict[object, bytes] = {}  # per peer: the attitude sample held back
         # where the blackout / mute windows count from (None: not yet, see windows_from_offboard)
         self.origin_s: float | None = None if config.windows_from_offboard else 0.0
+        self._offboard_seen = False
 
     def start_windows(self, now_s: float) -> None:
-        """The autopilot entered OFFBOARD / GUIDED: relative windows count from now (once)."""
+        """The autopilot entered OFFBOARD / GUIDED: relative windows count from now (once), and
+        ``loss_from_offboard`` loss starts."""
+        self._offboard_seen = True
         if self.origin_s is None:
             self.origin_s = now_s
+
+    def _lossy(self) -> bool:
+        return self.config.loss > 0.0 and (self._offboard_seen or not self.config.loss_from_offboard)
 
     def _in(self, window: tuple[float, float] | None, now_s: float) -> bool:
         if window is None or self.origin_s is None:
@@ -54,7 +60,7 @@ class FaultInjector:
         if self.in_blackout(now_s) or self.heartbeat_muted(data, now_s):
             self.dropped_out += 1
             return []
-        if cfg.loss > 0.0 and self.rng.random() < cfg.loss:
+        if self._lossy() and self.rng.random() < cfg.loss:
             self.dropped_out += 1
             return []
         if cfg.corrupt > 0.0:
@@ -87,7 +93,7 @@ class FaultInjector:
         return [data, held]
 
     def drop_incoming(self) -> bool:
-        if self.config.loss > 0.0 and self.rng.random() < self.config.loss:
+        if self._lossy() and self.rng.random() < self.config.loss:
             self.dropped_in += 1
             return True
         return False

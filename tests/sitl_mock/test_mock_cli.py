@@ -40,7 +40,7 @@ def test_config_round_trips_through_flags() -> None:
     config = MockConfig(profile="ardupilot", vehicle="px4-default", udp_local_port=0, udp_remote=None, tcp_port=0,
                         speed=5.0, spawn=SpawnSpec("hover", (1.0, 2.0, -3.0)), seed=4, duration_s=2.5,
                         faults=FaultConfig(loss=0.25, duplicate=0.01, corrupt=0.02, blackout_s=(1.0, 2.0),
-                                           takeover_at_s=3.0, takeover_mode="BRAKE"))
+                                           takeover_at_s=3.0, takeover_mode="BRAKE", loss_from_offboard=True))
     assert _config(*config_to_args(config)) == config
 
 

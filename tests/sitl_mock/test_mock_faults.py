@@ -29,6 +29,18 @@ def test_loss_rate_matches_setting() -> None:
     assert dropped / N == pytest.approx(0.2, abs=0.015)
 
 
+def test_loss_from_offboard_starts_with_the_mode() -> None:
+    """``loss_from_offboard``: nothing is lost, either way, until the autopilot enters OFFBOARD /
+    GUIDED (start_windows); from then on the configured rate."""
+    injector = FaultInjector(FaultConfig(loss=0.5, loss_from_offboard=True), np.random.default_rng(3))
+    assert sum(len(injector.outgoing(f, 0.0)) for f in _frames(200)) == 200
+    assert not any(injector.drop_incoming() for _ in range(200))
+    injector.start_windows(1.0)
+    sent = sum(len(injector.outgoing(f, 1.0)) for f in _frames(N))
+    assert sent / N == pytest.approx(0.5, abs=0.02)
+    assert sum(injector.drop_incoming() for _ in range(N)) / N == pytest.approx(0.5, abs=0.02)
+
+
 def test_duplicates() -> None:
     injector = FaultInjector(FaultConfig(duplicate=0.1), np.random.default_rng(2))
     sent = sum(len(injector.outgoing(f, 0.0)) for f in _frames(N))
