@@ -100,6 +100,10 @@ class FlightConfig:
     velocity_correction_s: float | None = 0.3
 
 
+# flight.velocity_correction_s's range (s); `identify --velocity-correction` takes the same
+VELOCITY_CORRECTION_RANGE_S = (0.05, 60.0)
+
+
 @dataclass(frozen=True)
 class CompensationConfig:
     """Inner-loop compensation (pf_offboard.control.compensator): observer + delay predictor +
@@ -455,7 +459,7 @@ def _flight(data: Any) -> FlightConfig:
             nullable=True,
         ),
         velocity_correction_s=_number(
-            d, "velocity_correction_s", "flight.velocity_correction_s", f.velocity_correction_s, 0.05, 60.0, nullable=True,
+            d, "velocity_correction_s", "flight.velocity_correction_s", f.velocity_correction_s, *VELOCITY_CORRECTION_RANGE_S, nullable=True,
         ),
     )
 

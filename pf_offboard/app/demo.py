@@ -47,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def demo_vehicle(args: argparse.Namespace) -> str:
     """The mock vehicle: ``--vehicle``, else the realistic preset of ``--autopilot``."""
-    return args.vehicle if getattr(args, "vehicle", None) else DEMO_VEHICLES[args.autopilot]
+    return args.vehicle or DEMO_VEHICLES[args.autopilot]
 
 
 def paper_config(vehicle: str = "fast") -> Path:

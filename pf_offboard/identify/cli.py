@@ -53,9 +53,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.hover_thrust is not None and not (math.isfinite(args.hover_thrust) and 0.05 <= args.hover_thrust <= 0.95):
         raise InputError("--hover-thrust", f"must be in [0.05, 0.95], got {args.hover_thrust}")
+    from pf_offboard.config import VELOCITY_CORRECTION_RANGE_S
+
     correction = args.velocity_correction
-    if correction is not None and not (math.isfinite(correction) and 0.05 <= correction <= 60.0):
-        raise InputError("--velocity-correction", f"must be in [0.05, 60] s (flight.velocity_correction_s's range), got {correction}")
+    lo, hi = VELOCITY_CORRECTION_RANGE_S
+    if correction is not None and not (math.isfinite(correction) and lo <= correction <= hi):
+        raise InputError("--velocity-correction", f"must be in [{lo:g}, {hi:g}] s (flight.velocity_correction_s's range), got {correction}")
     logs = [Path(p) for p in args.logs]
     if args.connect:
         if logs:
