@@ -4,8 +4,8 @@
 The recorded flights (``pf-offboard fly`` against a real PX4 SIH quad, see
 shared/data/px4-sih/README.md) are 0.8-1.5 MB each, mostly telemetry identify does not read. This
 keeps, from 2 s before the first flying setpoint to the end, only the records ``identify`` uses —
-LOCAL_POSITION_NED, the autopilot's HEARTBEAT and PARAM_VALUE (in; ATTITUDE_QUATERNION too for the
-rates flight, whose thrust acts along the measured attitude) and the
+LOCAL_POSITION_NED, ATTITUDE_QUATERNION (the vertical fit's measured tilt; a rates flight's thrust
+acts along it too), the autopilot's HEARTBEAT and PARAM_VALUE (in) and the
 app's setpoints (out: SET_POSITION_TARGET_LOCAL_NED, SET_ATTITUDE_TARGET) — byte for byte with
 their original UNIX stamps, and writes them as deterministic ``.tlog.gz`` (gzip mtime 0):
 
@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 from pf_offboard.logs.tlog import iter_tlog  # noqa: E402
 
 FLIGHTS = ("accel-1.5hz", "attitude-1.5hz", "rates-1.5hz-tau0.2")
-KEEP_IN = {"LOCAL_POSITION_NED", "HEARTBEAT", "PARAM_VALUE"}  # + ATTITUDE_QUATERNION for rates flights
+KEEP_IN = {"LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "HEARTBEAT", "PARAM_VALUE"}
 KEEP_OUT = {"SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET"}
 LEAD_S = 2.0
 
@@ -48,9 +48,8 @@ def extract(src: Path, dst: Path) -> int:
     entries = list(iter_tlog(src))
     start = next(e.time_unix_s for e in entries if e.direction == "out" and e.message.get_type() in KEEP_OUT and _flying(e.message))
     buf = io.BytesIO()
-    keep_in = KEEP_IN | ({"ATTITUDE_QUATERNION"} if "rates" in src.name else set())
     for e in entries:
-        keep = e.message.get_type() in (KEEP_OUT if e.direction == "out" else keep_in)
+        keep = e.message.get_type() in (KEEP_OUT if e.direction == "out" else KEEP_IN)
         # PARAM_VALUE (the hover thrust) is answered before the flight: keep it whenever it came
         if keep and (e.time_unix_s >= start - LEAD_S or e.message.get_type() == "PARAM_VALUE"):
             buf.write(struct.pack(">Q", int(round(e.time_unix_s * 1e6))) + e.frame)

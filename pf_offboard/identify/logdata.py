@@ -80,6 +80,9 @@ class Segment:
     see the module docstring), linearly interpolated.
     ``rates_sp_frd_rad_s`` / ``rates_frd_rad_s``: body-rate setpoints and ATTITUDE_QUATERNION
     rates (rates-mode logs only, else None).
+    ``thrust_axis_up``: the vertical (ENU up) component of the measured thrust axis, i.e. the
+    cosine of the measured tilt, from ATTITUDE_QUATERNION (linearly interpolated); None when the
+    log has no attitude covering the whole segment.
     """
 
     source: str
@@ -90,6 +93,7 @@ class Segment:
     velocity_enu_m_s: NDArray[np.float64]  # (N, 3)
     rates_sp_frd_rad_s: NDArray[np.float64] | None = None  # (N, 3)
     rates_frd_rad_s: NDArray[np.float64] | None = None  # (N, 3)
+    thrust_axis_up: NDArray[np.float64] | None = None  # (N,) cos(measured tilt), dimensionless
 
     @property
     def duration_s(self) -> float:
@@ -301,7 +305,15 @@ def load_log(
     kinds = [k for k in raw.sp_kind if k in SETPOINT_KINDS]
     if not kinds:
         raise InputError(name, "no acceleration or attitude setpoints from the app (component 191) in the log")
-    kind = max(SETPOINT_KINDS, key=kinds.count)
+    # the kind that flew: an app may stream other setpoints while the autopilot is not yet in its
+    # mode (pf-offboard sends neutral attitude targets before ArduPilot's GUIDED), more of them
+    # than it flies on a short flight
+    hb_unix = np.asarray(raw.hb_unix)
+    hb_idx = _hold_index(hb_unix, np.asarray(raw.sp_unix))
+    hb_active = np.asarray(raw.hb_active, dtype=bool)
+    flying = np.array([i >= 0 and bool(hb_active[i]) for i in hb_idx], dtype=bool) if len(hb_unix) else np.ones(len(raw.sp_kind), dtype=bool)
+    flown = [k for k, f in zip(raw.sp_kind, flying) if f and k in SETPOINT_KINDS]
+    kind = max(SETPOINT_KINDS, key=(flown if flown else kinds).count)
     slope, offset = _clock_map(raw)
     hover, hover_src = (None, "")
     if kind != "acceleration":
@@ -313,12 +325,7 @@ def load_log(
     dt = grid_dt_s if grid_dt_s is not None else min(max(period, 0.002), 0.01)
     # setpoints on the boot clock, and whether each one was flying
     sp_t = _setpoint_times(raw, lpn_t, slope, offset)
-    hb_unix = np.asarray(raw.hb_unix)
-    hb_idx = _hold_index(hb_unix, np.asarray(raw.sp_unix))
-    hb_active = np.asarray(raw.hb_active, dtype=bool)
-    sp_active = np.array(
-        [k == kind and (i >= 0 and bool(hb_active[i])) for k, i in zip(raw.sp_kind, hb_idx)], dtype=bool
-    ) if len(hb_unix) else np.array([k == kind for k in raw.sp_kind], dtype=bool)  # fmt: skip
+    sp_active = flying & np.array([k == kind for k in raw.sp_kind], dtype=bool)
     grid = np.arange(lpn_t[0], lpn_t[-1], dt)
     # the grid sample k stands for the interval [t_k, t_k+1): it takes the setpoint that arrived by
     # its middle (a setpoint answering the telemetry of t_k is sent a moment after t_k)
@@ -336,6 +343,7 @@ def load_log(
     velocity_enu = np.array([frames.ned_to_enu(v) for v in velocity])
     accel_enu, rates_sp, rates = _setpoint_accel(raw, kind, hover, safe, grid)
     valid &= np.all(np.isfinite(accel_enu), axis=1)
+    up = _thrust_axis_up(raw, grid)
     segments = []
     for start, stop in _runs(valid):
         if (stop - start) * dt < MIN_SEGMENT_S:
@@ -346,6 +354,7 @@ def load_log(
             velocity_enu_m_s=velocity_enu[sl],
             rates_sp_frd_rad_s=None if rates_sp is None else rates_sp[sl],
             rates_frd_rad_s=None if rates is None else rates[sl],
+            thrust_axis_up=None if up is None or not np.all(np.isfinite(up[sl])) else up[sl],
         ))  # fmt: skip
     if not segments:
         raise InputError(name, f"no stretch of at least {MIN_SEGMENT_S:g} s where {kind} setpoints were flying (armed, in OFFBOARD/GUIDED)")
@@ -397,6 +406,25 @@ def _setpoint_accel(
     att_r = np.asarray(raw.att_rates_frd, dtype=float)
     rates = np.column_stack([np.interp(grid, att_t, att_r[:, c]) for c in range(3)])
     return accel, rates_sp, rates
+
+
+def _thrust_axis_up(raw: _Raw, grid: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """cos(measured tilt) on the grid, linearly interpolated (the end values held); NaN across a
+    gap of more than 5 of the telemetry's periods (at least 0.1 s), or that far beyond its ends;
+    None without attitude telemetry."""
+    if len(raw.att_t) < 20:
+        return None
+    att_t = np.asarray(raw.att_t)
+    keep = np.concatenate(([True], np.diff(att_t) > 0.0))  # drop duplicated / reordered samples
+    att_t = att_t[keep]
+    if len(att_t) < 20:
+        return None
+    up = np.array([_body_z_enu(q)[2] for q, k in zip(raw.att_q_ned_frd, keep) if k])
+    out = np.interp(grid, att_t, up)
+    gap = max(5.0 * float((att_t[-1] - att_t[0]) / (len(att_t) - 1)), 0.1)
+    j = np.clip(np.searchsorted(att_t, grid), 1, len(att_t) - 1)
+    out[(grid < att_t[0] - gap) | (grid > att_t[-1] + gap) | (att_t[j] - att_t[j - 1] > gap)] = math.nan
+    return out
 
 
 def _body_z_enu(q_ned_frd: Sequence[float]) -> NDArray[np.float64]:

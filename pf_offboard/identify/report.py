@@ -24,6 +24,11 @@ def report_lines(ident: Identification, logs: Sequence[LogData]) -> list[str]:
         velocity = f"velocity made position-consistent ({vc:g} s)" if vc is not None else "velocity as reported"
         lines.append(f"{log.source}: {log.kind} setpoints, {len(log.segments)} active stretch(es), {log.duration_s:.1f} s{hover}; {velocity}")
     lines.append(f"fitted on {ident.duration_s:.1f} s of active flight (model: dv/dt = gain * delay(lag(a_sp)) - drag * v + c, world frame)")
+    share = ident.z.measured_tilt_share
+    if share > 0.0:
+        lines.append(f"z input: thrust magnitude through the lag, along the measured tilt (u_z = lag(|a_sp + g|) * cos(tilt) - g) on {100 * share:.0f} % of samples; the rest a_sp,z")
+    else:
+        lines.append("z input: the vertical setpoint a_sp,z (no attitude telemetry in the log: the tilt's lag may read as vertical lag)")
     lines.append("axis  lag s   delay s  rise63 s  gain    drag 1/s  bias m/s^2          R^2    NRMSE  samples  excitation m/s^2")
     for f in (ident.xy, ident.z):
         lines.append(_axis_line(f))
@@ -61,7 +66,7 @@ def as_json(ident: Identification, logs: Sequence[LogData]) -> str:
         return {
             "lag_s": f.lag_s, "delay_s": f.delay_s, "rise_63_s": f.rise_63_s, "gain": f.gain,
             "drag_1_s": f.drag_1_s, "bias_m_s2": list(f.bias_m_s2), "r2": f.r2, "nrmse": f.nrmse,
-            "samples": f.samples, "excitation_m_s2": f.excitation_m_s2,
+            "samples": f.samples, "excitation_m_s2": f.excitation_m_s2, "measured_tilt_share": f.measured_tilt_share,
         }  # fmt: skip
 
     out = {

@@ -15,15 +15,21 @@ from .types import AccelerationSetpoint, AttitudeSetpoint, Spawn
 def accel_step_rise_time_s(params: VehicleParams, step_ned_m_s2: tuple[float, float, float],
                            duration_s: float = 1.0) -> float:
     """Time for the kinematic acceleration to reach 63 % of an acceleration-setpoint step,
-    starting from a hover, with drag switched off (so the step's final value is the setpoint).
+    starting from a hover, with drag switched off and the autopilot's hover thrust set to the
+    true one (so the response starts at zero and ends at the setpoint).
 
-    The component measured is the step's direction (the step must be along one axis).
+    The component measured is the step's direction (the step must be along one axis). A wrong
+    hover-thrust parameter (``px4-sih``'s 0.5 for 0.49, as PX4 flies SIH) scales and offsets the
+    response — what identify fits as gain and bias — without changing its timing; left in, it
+    started the vertical step from +0.2 m/s^2, and the 63 % mark came at 0.095 s going up and
+    0.144 s going down for the same 0.114 s response.
     """
     axis = int(np.argmax(np.abs(step_ned_m_s2)))
     target = float(step_ned_m_s2[axis])
     if target == 0.0 or sum(1 for c in step_ned_m_s2 if c != 0.0) != 1:
         raise ValueError("accel_step_rise_time_s.step_ned_m_s2: need a non-zero step along one axis")
-    sim = Simulator(params.with_(drag_1_s=0.0), np.random.default_rng(0), Spawn.hover((0.0, 0.0, -50.0)))
+    matched = params.with_(drag_1_s=0.0, hover_thrust=params.true_hover_thrust)
+    sim = Simulator(matched, np.random.default_rng(0), Spawn.hover((0.0, 0.0, -50.0)))
     sp = AccelerationSetpoint(step_ned_m_s2, yaw_rad=0.0)
     t_prev, a_prev = 0.0, 0.0
     for _ in range(int(round(duration_s * 1000))):

@@ -178,6 +178,20 @@ def test_velocity_correction_is_reported_and_harmless_on_a_consistent_estimate(g
     assert "velocity made position-consistent (0.3 s)" in capsys.readouterr().out
 
 
+def test_the_report_says_what_the_vertical_input_was(good_log, tmp_path, capsys) -> None:
+    # the good log has no attitude telemetry: the vertical setpoint, with the caveat
+    assert main(["identify", str(good_log)]) == 0
+    assert "z input: the vertical setpoint a_sp,z (no attitude telemetry" in capsys.readouterr().out
+    assert main(["identify", "--json", str(good_log)]) == 0
+    assert json.loads(capsys.readouterr().out)["z"]["measured_tilt_share"] == 0.0
+    tilted = write_tlog(tmp_path / "tilted.tlog", duration_s=12.0, tilt_coupled=True)
+    assert main(["identify", str(tilted)]) == 0
+    assert "along the measured tilt (u_z = lag(|a_sp + g|) * cos(tilt) - g) on 100 % of samples" in capsys.readouterr().out
+    assert main(["identify", "--json", str(tilted)]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["z"]["measured_tilt_share"] == 1.0 and data["xy"]["measured_tilt_share"] == 0.0
+
+
 def test_unwritable_config_target(good_log, tmp_path, capsys) -> None:
     target = tmp_path / "ro"
     target.mkdir()

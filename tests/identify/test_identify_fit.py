@@ -39,6 +39,30 @@ def test_recovers_every_parameter_of_an_exact_first_order_vehicle(truth_log) -> 
     assert xy.r2 > 0.999 and z.r2 > 0.999 and xy.nrmse < 0.05
 
 
+def test_the_vertical_is_fitted_along_the_measured_tilt(tmp_path) -> None:
+    """A thrust-vector vehicle (horizontal part lagging like the attitude loop, magnitude like the
+    motors; identify's vertical model) with its attitude logged: every vertical parameter comes
+    back. Read without the attitude (u = a_sp,z), the same log fits visibly worse: the coupling is
+    unexplained (here the steps are independent per axis, so it is noise to that fit; on a path,
+    where climbs and turns go together, it became vertical lag: docs/identify.md, *Vertical*)."""
+    truth = replace(Truth(), lag_xy_s=0.15, lag_z_s=0.03)
+    log = load_log(write_tlog(tmp_path / "tilted.tlog", truth, amplitude_m_s2=3.0, tilt_coupled=True))
+    assert all(s.thrust_axis_up is not None for s in log.segments)
+    assert min(float(s.thrust_axis_up.min()) for s in log.segments) < 0.95  # tilts beyond 18 degrees
+    ident = identify(log.segments)
+    z = ident.z
+    assert z.measured_tilt_share == 1.0 and ident.xy.measured_tilt_share == 0.0
+    assert z.lag_s == pytest.approx(truth.lag_z_s, abs=0.005)
+    assert z.delay_s == pytest.approx(truth.delay_s, abs=0.005)
+    assert z.gain == pytest.approx(truth.gain_z, rel=0.02)
+    assert z.drag_1_s == pytest.approx(truth.drag_z_1_s, rel=0.03)
+    assert z.r2 > 0.999
+    assert ident.xy.lag_s == pytest.approx(truth.lag_xy_s, abs=0.005)
+    plain = identify([replace(s, thrust_axis_up=None) for s in log.segments]).z
+    assert plain.measured_tilt_share == 0.0
+    assert plain.nrmse > 3.0 * z.nrmse and plain.r2 < z.r2
+
+
 def test_a_different_vehicle_gives_different_values(tmp_path) -> None:
     # the fit follows the data (not a default): a slow, draggy vehicle
     truth = replace(Truth(), lag_xy_s=0.3, drag_xy_1_s=1.2, gain_xy=0.7)
@@ -169,3 +193,32 @@ def test_a_fit_without_quality_windows_is_not_flyable() -> None:
     ident = Identification(good, unmeasured, None, 10.0, ())
     assert "z R^2 nan" in ident.unflyable()
     assert Identification(good, dataclasses.replace(unmeasured, r2=0.9), None, 10.0, ()).unflyable() == ""
+
+
+def test_the_setpoint_kind_is_the_one_that_flew(tmp_path) -> None:
+    """An ArduCopter `fly` log held 40 s of level attitude targets sent before arming and GUIDED and
+    21 s of flown body rates: the kind fitted is the one sent while the autopilot was in the app's
+    mode, not the most numerous (that log failed with "no stretch ... where attitude setpoints were
+    flying")."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    from pf_offboard.logs.tlog import TlogWriter, read_tlog
+
+    path = write_tlog(tmp_path / "flight.tlog", duration_s=20.0, offboard_from_s=12.0)
+    padded = tmp_path / "padded.tlog"
+    app = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+    entries = read_tlog(path)
+    t0 = entries[0].time_unix_s
+    with TlogWriter.open(padded) as out:
+        k = 0
+        for e in entries:
+            # before OFFBOARD: a level attitude target every 2.5 ms (4800 of them, against 800 flown)
+            while t0 + 0.0025 * k < min(e.time_unix_s, t0 + 12.0):
+                msg = mavlink.MAVLink_set_attitude_target_message(0, 1, 1, 0x07, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.5)
+                out.write(msg.pack(app), t0 + 0.0025 * k)
+                k += 1
+            out.write(e.message.get_msgbuf(), e.time_unix_s)
+    log = load_log(padded)
+    assert log.kind == "acceleration"
+    assert log.duration_s == pytest.approx(8.0, abs=0.3)
+    assert identify(log.segments).xy.r2 > 0.99
