@@ -99,6 +99,28 @@ def test_px4_sih_meets_issue_8s_targets(tmp_path: Path, output: str) -> None:
     with _running(["../bin/px4", "-d"], rootfs, tmp_path / "px4.log"):
         figures = _fly(tmp_path / "log", "udpin:127.0.0.1:14540", "px4-sih", 5, "--output", output)
     _check(*figures, f"PX4 SIH, {output}, five laps")
+    _check_identify(tmp_path / "log" / "flight.tlog", output)
+
+
+def _check_identify(tlog: Path, output: str) -> None:
+    """identify on the flight's own log, with the velocity made position-consistent as the app
+    flew it, finds SIH's physical drag (SIH_KDV 1 N/(m/s) on 1 kg: 1.0 1/s): horizontally within
+    10 % (five-lap flights: 1.03-1.06), vertically within 20 % (1.07-1.17: EKF2's vertical velocity
+    is not biased like its horizontal one, and the correction adds the height estimate's wander;
+    as reported 0.97-1.02). The vertical is fitted along the measured tilt and answers before the
+    horizontal (not comparable in a rates log, whose horizontal fit is the thrust path's)."""
+    from pf_offboard.identify import identify, load_log
+
+    ident = identify(load_log(tlog, velocity_correction_s=0.3).segments)
+    xy, z = ident.xy, ident.z
+    print(f"identify ({output}): xy rise {xy.rise_63_s:.3f} s gain {xy.gain:.3f} drag {xy.drag_1_s:.3f}; "
+          f"z rise {z.rise_63_s:.3f} s gain {z.gain:.3f} drag {z.drag_1_s:.3f} (tilt {z.measured_tilt_share:.2f})")  # fmt: skip
+    assert z.measured_tilt_share == 1.0
+    assert xy.drag_1_s == pytest.approx(1.0, rel=0.10)
+    assert z.drag_1_s == pytest.approx(1.0, rel=0.20)
+    assert xy.r2 > 0.85 and z.r2 > 0.85
+    if output != "rates":
+        assert z.rise_63_s < xy.rise_63_s
 
 
 @pytest.mark.skipif(ARDUCOPTER is None, reason="set PF_OFFBOARD_ARDUCOPTER to ArduPilot's build/sitl/bin/arducopter to fly ArduCopter SITL")
