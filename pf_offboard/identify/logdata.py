@@ -305,9 +305,9 @@ def load_log(
     kinds = [k for k in raw.sp_kind if k in SETPOINT_KINDS]
     if not kinds:
         raise InputError(name, "no acceleration or attitude setpoints from the app (component 191) in the log")
-    # the kind that flew: an app may stream other setpoints while the autopilot is not yet in its
-    # mode (pf-offboard sends neutral attitude targets before ArduPilot's GUIDED), more of them
-    # than it flies on a short flight
+    # the kind that flew: an app may stream other setpoints while the autopilot is not yet armed in
+    # its mode, more of them than it flies (an ArduCopter `fly` log: 40 s of level attitude targets
+    # before arming in GUIDED, 21 s of flown body rates)
     hb_unix = np.asarray(raw.hb_unix)
     hb_idx = _hold_index(hb_unix, np.asarray(raw.sp_unix))
     hb_active = np.asarray(raw.hb_active, dtype=bool)
