@@ -333,9 +333,7 @@ def load_log(
     valid = idx >= 0
     safe = np.where(valid, idx, 0)
     valid &= sp_active[safe] & (grid - sp_t[safe] <= MAX_SETPOINT_AGE_S)
-    # telemetry around each grid point (no interpolation across a telemetry gap)
-    j = np.clip(np.searchsorted(lpn_t, grid), 1, len(lpn_t) - 1)
-    valid &= (lpn_t[j] - lpn_t[j - 1]) <= max(5.0 * period, 0.1)
+    valid &= _within_telemetry(lpn_t, grid)  # no interpolation across a telemetry gap
     v_ned = np.asarray(raw.lpn_v_ned)
     if velocity_correction_s is not None:
         v_ned = position_consistent_velocity(lpn_t, np.asarray(raw.lpn_p_ned), v_ned, velocity_correction_s)
@@ -409,9 +407,8 @@ def _setpoint_accel(
 
 
 def _thrust_axis_up(raw: _Raw, grid: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """cos(measured tilt) on the grid, linearly interpolated (the end values held); NaN across a
-    gap of more than 5 of the telemetry's periods (at least 0.1 s), or that far beyond its ends;
-    None without attitude telemetry."""
+    """cos(measured tilt) on the grid, linearly interpolated (the end values held); NaN outside
+    the attitude telemetry (:func:`_within_telemetry`); None without attitude telemetry."""
     if len(raw.att_t) < 20:
         return None
     att_t = np.asarray(raw.att_t)
@@ -420,11 +417,15 @@ def _thrust_axis_up(raw: _Raw, grid: NDArray[np.float64]) -> NDArray[np.float64]
     if len(att_t) < 20:
         return None
     up = np.array([_body_z_enu(q)[2] for q, k in zip(raw.att_q_ned_frd, keep) if k])
-    out = np.interp(grid, att_t, up)
-    gap = max(5.0 * float((att_t[-1] - att_t[0]) / (len(att_t) - 1)), 0.1)
-    j = np.clip(np.searchsorted(att_t, grid), 1, len(att_t) - 1)
-    out[(grid < att_t[0] - gap) | (grid > att_t[-1] + gap) | (att_t[j] - att_t[j - 1] > gap)] = math.nan
-    return out
+    return np.where(_within_telemetry(att_t, grid), np.interp(grid, att_t, up), math.nan)
+
+
+def _within_telemetry(times: NDArray[np.float64], grid: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Per grid time: it lies between two telemetry samples (increasing ``times``) at most 5 of
+    the telemetry's mean periods (at least 0.1 s) apart, or at most that far beyond the ends."""
+    gap = max(5.0 * float((times[-1] - times[0]) / (len(times) - 1)), 0.1)
+    j = np.clip(np.searchsorted(times, grid), 1, len(times) - 1)
+    return (times[j] - times[j - 1] <= gap) & (grid >= times[0] - gap) & (grid <= times[-1] + gap)
 
 
 def _body_z_enu(q_ned_frd: Sequence[float]) -> NDArray[np.float64]:

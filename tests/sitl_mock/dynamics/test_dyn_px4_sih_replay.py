@@ -61,6 +61,7 @@ SMOOTH_SAMPLES = 5  # 50 ms moving average for accelerations
 RATE_ONLY_BIT = 128  # SET_ATTITUDE_TARGET: attitude ignored
 
 VEL_NRMSE_MAX = {"accel-1.5hz": 0.15, "attitude-1.5hz": 0.32, "rates-1.5hz-tau0.2": 0.30}
+VERTICAL = slice(2, 3)
 VERTICAL_VEL_NRMSE_MAX = {"accel-1.5hz": 0.25, "attitude-1.5hz": 0.15, "rates-1.5hz-tau0.2": 0.30}
 
 
@@ -137,14 +138,9 @@ def replay(flight: str, preset_name: str) -> dict[str, np.ndarray]:
     return {k: np.stack(v) for k, v in out.items()}  # (windows, samples, 3)
 
 
-def nrmse(sim: np.ndarray, real: np.ndarray) -> float:
-    """Horizontal NRMSE: RMS(sim − real) / std(real), components x and y pooled."""
-    return float(np.sqrt(np.mean((sim[..., :2] - real[..., :2]) ** 2)) / np.std(real[..., :2]))
-
-
-def vertical_nrmse(sim: np.ndarray, real: np.ndarray) -> float:
-    """Vertical NRMSE: RMS(sim − real) / std(real) of the z component."""
-    return float(np.sqrt(np.mean((sim[..., 2] - real[..., 2]) ** 2)) / np.std(real[..., 2]))
+def nrmse(sim: np.ndarray, real: np.ndarray, axes: slice = slice(0, 2)) -> float:
+    """NRMSE: RMS(sim − real) / std(real), the ``axes`` components pooled (default: horizontal)."""
+    return float(np.sqrt(np.mean((sim[..., axes] - real[..., axes]) ** 2)) / np.std(real[..., axes]))
 
 
 def lag_and_gain(a_sp: np.ndarray, a: np.ndarray, skip_s: float = 0.3, max_lag_s: float = 0.5) -> tuple[float, float]:
@@ -168,8 +164,8 @@ def test_px4_sih_preset_follows_the_real_vehicle(flight: str) -> None:
     vel = nrmse(r["dv_sim"], r["dv_real"])
     vel_fast = nrmse(ideal["dv_sim"], ideal["dv_real"])
     acc = nrmse(r["a_sim"], r["a_real"])
-    vel_z = vertical_nrmse(r["dv_sim"], r["dv_real"])
-    vel_z_fast = vertical_nrmse(ideal["dv_sim"], ideal["dv_real"])
+    vel_z = nrmse(r["dv_sim"], r["dv_real"], VERTICAL)
+    vel_z_fast = nrmse(ideal["dv_sim"], ideal["dv_real"], VERTICAL)
     print(f"{flight}: velocity NRMSE px4-sih {vel:.3f} (fast {vel_fast:.3f}), acceleration NRMSE {acc:.3f}; "
           f"vertical velocity NRMSE {vel_z:.3f} (fast {vel_z_fast:.3f})")  # fmt: skip
     assert vel <= VEL_NRMSE_MAX[flight]
