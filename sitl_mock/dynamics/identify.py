@@ -22,7 +22,8 @@ def accel_step_rise_time_s(params: VehicleParams, step_ned_m_s2: tuple[float, fl
     hover-thrust parameter (``px4-sih``'s 0.5 for 0.49, as PX4 flies SIH) scales and offsets the
     response — what identify fits as gain and bias — without changing its timing; left in, it
     started the vertical step from +0.2 m/s^2, and the 63 % mark came at 0.095 s going up and
-    0.144 s going down for the same 0.114 s response.
+    0.144 s going down for the same 0.114 s response (the preset then, with one setpoint latency
+    for thrust and tilt; its thrust latency has made it 0.062 s since).
     """
     axis = int(np.argmax(np.abs(step_ned_m_s2)))
     target = float(step_ned_m_s2[axis])

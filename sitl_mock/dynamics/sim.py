@@ -110,9 +110,14 @@ class Simulator:
         self._est: EstimatorError | None = (
             EstimatorError(params.estimator, rng.spawn(1)[0]) if params.estimator.enabled else None
         )
-        # Setpoint latency: setpoints take effect setpoint_latency_s after they are given.
+        # Setpoint latency: setpoints take effect setpoint_latency_s after they are given; their
+        # collective thrust thrust_latency_s after (a second queue when the two differ).
         self._latency_ticks = int(round(params.setpoint_latency_s * PHYSICS_RATE_HZ))
+        thrust_latency_s = params.setpoint_latency_s if params.thrust_latency_s is None else params.thrust_latency_s
+        self._thrust_latency_ticks = int(round(thrust_latency_s * PHYSICS_RATE_HZ))
+        self._split_thrust = self._thrust_latency_ticks != self._latency_ticks
         self._pending_sp: deque[tuple[int, Setpoint]] = deque()
+        self._pending_thrust: deque[tuple[int, Setpoint]] = deque()
         self._init_constants(params)
         self._ticks = 0
         self._t_req_s = 0.0
@@ -140,6 +145,7 @@ class Simulator:
         self._q_sp = q
         self._thrust_sp = params.hover_thrust if spawn.motors_at_hover else 0.0
         self._setpoint: Setpoint = AccelerationSetpoint((0.0, 0.0, 0.0)) if spawn.motors_at_hover else MotorsOff()
+        self._thrust_setpoint: Setpoint = self._setpoint  # whose collective is flown (split latency)
         self._sp_kind: type = type(self._setpoint)
         self._yaw_hold: float | None = None
         self._vel_int = [0.0, 0.0, 0.0]
@@ -202,22 +208,53 @@ class Simulator:
             raise ValueError(f"Simulator.step.setpoint: unsupported setpoint {type(setpoint).__name__}")
         self._t_req_s += dt_s
         target = int(round(self._t_req_s * PHYSICS_RATE_HZ))
-        if self._latency_ticks == 0:
+        if self._latency_ticks == 0 and not self._split_thrust:
             self._select(setpoint)
             if target > self._ticks:
                 self._run_pushed(target - self._ticks)
         else:
-            pending = self._pending_sp
-            pending.append((self._ticks + self._latency_ticks, setpoint))
-            while True:
-                while pending and pending[0][0] <= self._ticks:
-                    self._select(pending.popleft()[1])
-                if self._ticks >= target:
-                    break
-                stop = min(target, pending[0][0]) if pending else target
-                self._run_pushed(stop - self._ticks)
+            self._queue(self._ticks, setpoint)
+            self._run_queued(target)
         if self._est is not None:
             self._est.advance_to(self._ticks * PHYSICS_DT_S)
+
+    def _queue(self, given_tick: int, setpoint: Setpoint) -> None:
+        self._pending_sp.append((given_tick + self._latency_ticks, setpoint))
+        if self._split_thrust:
+            self._pending_thrust.append((given_tick + self._thrust_latency_ticks, setpoint))
+
+    def _run_queued(self, target: int) -> None:
+        """Run to tick ``target``, adopting each queued setpoint (and thrust) when it is due."""
+        pending, pending_t = self._pending_sp, self._pending_thrust
+        while True:
+            while pending and pending[0][0] <= self._ticks:
+                self._select(pending.popleft()[1])
+            while pending_t and pending_t[0][0] <= self._ticks:
+                self._select_thrust(pending_t.popleft()[1])
+            if self._ticks >= target:
+                break
+            stop = target
+            if pending and pending[0][0] < stop:
+                stop = pending[0][0]
+            if pending_t and pending_t[0][0] < stop:
+                stop = pending_t[0][0]
+            self._run_pushed(stop - self._ticks)
+
+    def prime(self, history: list[tuple[float, Setpoint]]) -> None:
+        """Setpoints given *before* the simulation started, as (age_s > 0, setpoint), oldest first:
+        each takes effect (or is already in effect) as if the simulation had been running, so a
+        replay that starts mid-flight sees the setpoints still in the latency's pipe. Only before
+        the first step."""
+        if self._ticks or self._t_req_s or self._pending_sp or self._pending_thrust:
+            raise ValueError("Simulator.prime: only before the first step")
+        ages = [_num("Simulator.prime", "age_s", a, 1e-9, 3600.0) for a, _ in history]
+        if any(b > a for a, b in zip(ages, ages[1:])):
+            raise ValueError("Simulator.prime: history must be oldest first (ages not increasing)")
+        for age, sp in zip(ages, (sp for _, sp in history)):
+            if not isinstance(sp, _SETPOINT_TYPES):
+                raise ValueError(f"Simulator.prime: unsupported setpoint {type(sp).__name__}")
+            self._queue(-int(round(age * PHYSICS_RATE_HZ)), sp)
+        self._run_queued(0)
 
     def lose_thrust(self, factor: float) -> None:
         """Every motor's full (and idle) thrust x ``factor`` from now on: a sagging battery, damaged
@@ -410,8 +447,23 @@ class Simulator:
             self._thrust_sp = 0.0
         elif kind is RateSetpoint:
             r = sp.rates_frd_rad_s  # type: ignore[union-attr]
-            self._rs = (r[0], r[1], r[2], sp.thrust_norm * self._tmax)  # type: ignore[union-attr]
-            self._thrust_sp = sp.thrust_norm  # type: ignore[union-attr]
+            thrust = self._flown_thrust_setpoint().thrust_norm  # type: ignore[union-attr]
+            self._rs = (r[0], r[1], r[2], thrust * self._tmax)
+            self._thrust_sp = thrust
+
+    def _flown_thrust_setpoint(self) -> Setpoint:
+        """The setpoint whose collective thrust is flown: the thrust path's (split latency) when it
+        holds the same kind as the attitude path's, else the attitude path's own."""
+        tsp = self._thrust_setpoint
+        return tsp if self._split_thrust and type(tsp) is self._sp_kind else self._setpoint
+
+    def _select_thrust(self, sp: Setpoint) -> None:
+        """Adopt a setpoint's collective thrust (split latency: it arrives before its attitude)."""
+        self._thrust_setpoint = sp
+        if self._sp_kind is RateSetpoint and type(sp) is RateSetpoint:
+            rs = self._rs
+            self._thrust_sp = sp.thrust_norm
+            self._rs = (rs[0], rs[1], rs[2], sp.thrust_norm * self._tmax)
 
     # ------------------------------------------------------------------------------------------
     # Autopilot: position controller, acceleration mapping, attitude controller
@@ -430,10 +482,13 @@ class Simulator:
             else:
                 self._yaw_hold = None
             qd, thrust = self._accel_to_attitude(sp.accel_ned_m_s2, yaw)  # type: ignore[union-attr]
+            tsp = self._flown_thrust_setpoint()
+            if tsp is not sp:
+                thrust = self._accel_to_attitude(tsp.accel_ned_m_s2, yaw)[1]  # type: ignore[union-attr]
             ff = None
         elif kind is AttitudeSetpoint:
             qd = sp.q_ned_frd  # type: ignore[union-attr]
-            thrust = sp.thrust_norm  # type: ignore[union-attr]
+            thrust = self._flown_thrust_setpoint().thrust_norm  # type: ignore[union-attr]
             ff = sp.rates_ff_frd_rad_s  # type: ignore[union-attr]
             yaw_rate_w = 0.0
         elif kind is PositionSetpoint:

@@ -21,6 +21,7 @@ import pytest
 import yaml
 
 from pf_offboard.identify import identify, load_log
+from pf_offboard.identify.fit import model_fields
 from pf_offboard.identify.excite import ExcitationSpec, simulate_excitation
 from pf_offboard.sim.flight import SimSpec
 from sitl_mock.dynamics import preset
@@ -117,11 +118,14 @@ def test_wrong_hover_thrust_parameter_is_recovered_as_gain(tmp_path, truth) -> N
 # where drag acts. Fitted as reported, 20 s path logs give a low drag; with the velocity made
 # position-consistent (identify --velocity-correction, the app's own flight.velocity_correction_s
 # rule) gain and drag come within 10 %. Eight seeds of this fixture's flight measured
-# (docs/identify.md, *Velocity*, *Vertical*): xy rise 0.232-0.252 s (truth 0.242), gain 0.97-1.03,
-# drag 0.93-1.03 (as reported 0.82-0.95); z gain 0.98-1.03, drag 0.96-1.02; the vertical rise,
-# fitted along the measured tilt, 0.104-0.118 s for the truth 0.114 s (-8.8 ... +3.5 %; noise-free
-# 0.114 s). Fitted to the vertical setpoint alone it was 0.118-0.140 s (+3.5 ... +23 %; noise-free
-# 0.146 s): the tilt's lag read as vertical lag.
+# (docs/identify.md, *Velocity*, *Vertical*): xy rise 0.234-0.258 s (truth 0.242), gain 0.97-1.03,
+# drag 0.93-1.03 (as reported 0.82-0.95); z gain 1.01-1.06, drag 1.00-1.08.
+# The vertical rise (the thrust's: 0.062 s, as the real PX4 SIH's 0.052-0.062) comes out 0.060 s
+# noise-free, but 0.064-0.090 s with the estimator's noise: the app answers the velocity noise at
+# once and the thrust answers the app within the window, so the input is correlated with the
+# measurement error (closed-loop identification; the real PX4 SIH's compensated path logs give
+# 0.068-0.104 s the same way). Nothing written depends on it while the vertical is faster than the
+# horizontal dead time (accel_lag_z_s 0, accel_delay_z_s null: fit.model_fields).
 SIH = "px4-sih"
 
 
@@ -156,7 +160,9 @@ def test_path_logs_of_the_noisy_preset_fit_within_10_percent_with_the_position_c
             assert f.drag_1_s == pytest.approx(params.drag_1_s, rel=0.10)
         assert fit.xy.rise_63_s == pytest.approx(rise_xy, rel=0.10)
         assert fit.z.measured_tilt_share == 1.0
-        assert fit.z.rise_63_s == pytest.approx(rise_z, rel=0.10)
+        assert rise_z * 0.9 <= fit.z.rise_63_s <= rise_z * 1.6  # closed-loop noise bias, above
+        written = model_fields(fit)
+        assert (written["accel_lag_z_s"], written["accel_delay_z_s"]) == (0.0, None)  # the truth's section
         raw_err.append(abs(raw.xy.drag_1_s - params.drag_1_s))
         corrected_err.append(abs(fit.xy.drag_1_s - params.drag_1_s))
         z_err.append(fit.z.rise_63_s / rise_z - 1.0)
@@ -167,3 +173,26 @@ def test_path_logs_of_the_noisy_preset_fit_within_10_percent_with_the_position_c
     # and further off in all
     assert all(p > f for p, f in zip(z_plain_err, z_err))
     assert sum(map(abs, z_err)) < sum(map(abs, z_plain_err))
+
+
+def test_noise_free_path_log_recovers_the_vertical_rise(tmp_path, monkeypatch) -> None:
+    """The same 20 s path flight with the estimator's noise off: the vertical rise within 10 %
+    (the model is exact; the noisy logs' bias above is the closed loop's, not the fit's)."""
+    import sitl_mock.autopilot as autopilot
+    from pf_offboard.sim import simulate
+    from sitl_mock.dynamics.estimator import EstimatorNoise
+
+    def truth_only(name: str):
+        return preset(name).with_(estimator=EstimatorNoise())
+
+    monkeypatch.setattr(autopilot, "preset", truth_only)
+    spec = SimSpec(vehicle=SIH, duration_s=20.0, seed=1, epoch_unix_s=1.7e9)
+    tlog = simulate(REPO / "configs" / "px4-sih.yaml", spec, tmp_path).paths.tlog
+    fit = identify(load_log(tlog, velocity_correction_s=0.3).segments)
+    params = preset(SIH)
+    print(f"\nnoise-free: z rise {fit.z.rise_63_s:.3f} gain {fit.z.gain:.3f} drag {fit.z.drag_1_s:.3f}; xy rise {fit.xy.rise_63_s:.3f}")
+    assert fit.z.rise_63_s == pytest.approx(accel_step_rise_time_s(params, (0.0, 0.0, -1.0)), rel=0.10)
+    assert fit.xy.rise_63_s == pytest.approx(accel_step_rise_time_s(params, (1.0, 0.0, 0.0)), rel=0.10)
+    for f in (fit.xy, fit.z):
+        assert f.gain == pytest.approx(1.0, rel=0.05)
+        assert f.drag_1_s == pytest.approx(params.drag_1_s, rel=0.05)

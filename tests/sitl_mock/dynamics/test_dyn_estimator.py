@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from sitl_mock.dynamics import AccelerationSetpoint, PositionSetpoint, RateSetpoint, Simulator, Spawn, preset
+from sitl_mock.dynamics import AccelerationSetpoint, AttitudeSetpoint, PositionSetpoint, RateSetpoint, Setpoint, Simulator, Spawn, VehicleParams, preset
 from sitl_mock.dynamics.estimator import EstimatorError, EstimatorNoise
 
 
@@ -125,23 +125,99 @@ def test_measure_reports_the_estimate_and_the_truth_is_untouched() -> None:
     assert truth_only.estimate_error() == ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
 
-def test_setpoint_latency_is_a_pure_delay() -> None:
+def _hover_truth() -> VehicleParams:
     # Exact hover thrust: a state at rest stays at rest, so a later start is the same response.
     params = preset("px4-sih")
-    base = params.with_(estimator=EstimatorNoise(), hover_thrust=params.true_hover_thrust)
-    late = Simulator(base, np.random.default_rng(0), Spawn.hover((0, 0, -5)))
-    now = Simulator(base.with_(setpoint_latency_s=0.0), np.random.default_rng(0), Spawn.hover((0, 0, -5)))
-    step = AccelerationSetpoint((1.0, 0.0, 0.0), yaw_rad=0.0)
+    return params.with_(estimator=EstimatorNoise(), hover_thrust=params.true_hover_thrust)
+
+
+def _responses(late_params: VehicleParams, now_params: VehicleParams, step: Setpoint, axis: int) -> tuple[list[float], list[float]]:
+    """Acceleration along ``axis`` of two vehicles given a step at 0.2 s (hover before), 4 ms steps."""
+    late = Simulator(late_params, np.random.default_rng(0), Spawn.hover((0, 0, -5)))
+    now = Simulator(now_params, np.random.default_rng(0), Spawn.hover((0, 0, -5)))
     hold = AccelerationSetpoint((0.0, 0.0, 0.0), yaw_rad=0.0)
-    ax_late, ax_now = [], []
-    for k in range(300):  # 1.2 s: the step given at 0.2 s
+    a_late, a_now = [], []
+    for k in range(300):  # 1.2 s
         sp = step if k >= 50 else hold
-        ax_late.append(late.step(0.004, sp).accel_ned_m_s2[0])
-        ax_now.append(now.step(0.004, sp).accel_ned_m_s2[0])
+        a_late.append(late.step(0.004, sp).accel_ned_m_s2[axis])
+        a_now.append(now.step(0.004, sp).accel_ned_m_s2[axis])
+    return a_late, a_now
+
+
+def test_setpoint_latency_is_a_pure_delay() -> None:
+    base = _hover_truth().with_(thrust_latency_s=None)  # one latency for the whole setpoint
+    a_late, a_now = _responses(base, base.with_(setpoint_latency_s=0.0), AccelerationSetpoint((1.0, 0.0, 0.0), yaw_rad=0.0), 0)
     shift = int(round(base.setpoint_latency_s / 0.004))
     assert shift == 15
-    np.testing.assert_allclose(ax_late[shift + 50:], ax_now[50:-shift], atol=1e-9)
-    assert max(abs(a) for a in ax_late[: 50 + shift]) < 1e-6
+    np.testing.assert_allclose(a_late[shift + 50:], a_now[50:-shift], atol=1e-9)
+    assert max(abs(a) for a in a_late[: 50 + shift]) < 1e-6
+
+
+def test_thrust_latency_delays_the_collective_alone() -> None:
+    base = _hover_truth()
+    assert (base.setpoint_latency_s, base.thrust_latency_s) == (0.06, 0.005)  # px4-sih: thrust before tilt
+    # A vertical step is collective only: it answers after the thrust latency (5 ms, 1-2 steps of 4 ms)
+    thrust_only = base.with_(setpoint_latency_s=base.thrust_latency_s, thrust_latency_s=None)
+    up = AccelerationSetpoint((0.0, 0.0, -1.0), yaw_rad=0.0)
+    a_split, a_thrust_only = _responses(base, thrust_only, up, 2)
+    np.testing.assert_allclose(a_split, a_thrust_only, atol=1e-9)
+    assert a_split[50 + 8] < -0.2  # under way 32 ms after the step: long before the 60 ms latency
+    # A horizontal step: the tilt waits the full latency; the collective's share (its 1/cos(tilt)
+    # once tilted) changes nothing before the vehicle tilts, so the horizontal response is the
+    # one-latency vehicle's until then
+    side = AccelerationSetpoint((1.0, 0.0, 0.0), yaw_rad=0.0)
+    ax_split, ax_one = _responses(base, base.with_(thrust_latency_s=None), side, 0)
+    assert max(abs(a) for a in ax_split[: 50 + 15]) < 1e-6
+    assert abs(ax_split[50 + 15 + 40]) > 0.3
+    # ... and after it, the split flies the same tilt with the collective for it sooner
+    assert not np.allclose(ax_split, ax_one, atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["attitude", "rates"])
+def test_thrust_latency_applies_to_attitude_and_rate_setpoints(kind: str) -> None:
+    base = _hover_truth()
+    thrust = 1.1 * base.true_hover_thrust
+    late: Setpoint = (AttitudeSetpoint((1.0, 0.0, 0.0, 0.0), thrust) if kind == "attitude"
+                      else RateSetpoint((0.0, 0.0, 0.0), thrust))  # fmt: skip
+    sims = [Simulator(p, np.random.default_rng(0), Spawn.hover((0, 0, -5)))
+            for p in (base, base.with_(setpoint_latency_s=base.thrust_latency_s, thrust_latency_s=None))]  # fmt: skip
+    first = (AttitudeSetpoint((1.0, 0.0, 0.0, 0.0), base.true_hover_thrust) if kind == "attitude"
+             else RateSetpoint((0.0, 0.0, 0.0), base.true_hover_thrust))  # fmt: skip
+    az = [[], []]
+    for k in range(100):  # the kind is engaged for 0.2 s before the thrust step (both paths hold it)
+        for sim, out in zip(sims, az):
+            out.append(sim.step(0.004, first if k < 50 else late).accel_ned_m_s2[2])
+    np.testing.assert_allclose(az[0], az[1], atol=1e-9)  # the collective answers after 5 ms, not 60
+    assert az[0][50 + 8] < -0.3
+
+
+def test_prime_equals_setpoints_given_before_the_start() -> None:
+    """A primed simulator flies as one without latency fed the same setpoints shifted by it."""
+    base = _hover_truth().with_(thrust_latency_s=None)
+    a, b, c = (AccelerationSetpoint(v, yaw_rad=0.0) for v in ((0.5, 0.0, 0.0), (-0.5, 0.3, -0.4), (0.0, 0.0, 0.0)))
+    primed = Simulator(base, np.random.default_rng(0), Spawn.hover((0, 0, -5)))
+    primed.prime([(0.06, a), (0.03, b)])
+    shifted = Simulator(base.with_(setpoint_latency_s=0.0), np.random.default_rng(0), Spawn.hover((0, 0, -5)))
+    for k in range(24):  # 5 ms steps: a until 30 ms, b until 60 ms, then c (given at 0, 60 ms late)
+        s1 = primed.step(0.005, c)
+        s2 = shifted.step(0.005, a if k < 6 else b if k < 12 else c)
+        np.testing.assert_allclose(s1.accel_ned_m_s2, s2.accel_ned_m_s2, atol=1e-9)
+        np.testing.assert_allclose(s1.q_sp_ned_frd, s2.q_sp_ned_frd, atol=1e-12)
+    assert abs(s1.accel_ned_m_s2[1]) > 0.01  # b was flown (the only one with a y component)
+    with pytest.raises(ValueError, match="before the first step"):
+        primed.prime([(0.01, a)])
+    fresh = Simulator(base, np.random.default_rng(0), Spawn.hover((0, 0, -5)))
+    with pytest.raises(ValueError, match="oldest first"):
+        fresh.prime([(0.01, a), (0.02, b)])
+    with pytest.raises(ValueError, match="age_s"):
+        fresh.prime([(0.0, a)])
+
+
+def test_thrust_latency_is_validated() -> None:
+    with pytest.raises(ValueError, match="thrust_latency_s"):
+        preset("px4-sih").with_(thrust_latency_s=-0.01)
+    with pytest.raises(ValueError, match="thrust_latency_s"):
+        preset("px4-sih").with_(thrust_latency_s=math.nan)
 
 
 @pytest.mark.parametrize("field", ["fusion_rate_hz", "wander_velocity_std_xy_m_s", "position_white_std_z_m"])

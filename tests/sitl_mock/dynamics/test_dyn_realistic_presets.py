@@ -20,7 +20,7 @@ DOCUMENTED = {
 
 def _inner(name: str) -> VehicleParams:
     p = preset(name)
-    return p.with_(setpoint_latency_s=0.0, hover_thrust=p.true_hover_thrust, estimator=EstimatorNoise())
+    return p.with_(setpoint_latency_s=0.0, thrust_latency_s=None, hover_thrust=p.true_hover_thrust, estimator=EstimatorNoise())
 
 
 @pytest.mark.parametrize("name", sorted(DOCUMENTED))
