@@ -14,7 +14,7 @@ the tilt follows the horizontal group's slower response: while it tilts further 
 on the thrust meant for the larger tilt, while it levels it sinks. Fitting ``a_sp,z`` alone reads
 that coupling as vertical lag: on the `px4-sih` mock's noise-free 20 s path log the vertical rise
 comes out 0.106 s for its 0.062 s, along the measured tilt 0.060 s (with the estimate's noise,
-which the closed loop feeds into the input, 0.064-0.090 s, and 0.100-0.126 s alone). On the real PX4 SIH's recorded flights the acceleration and
+which the closed loop feeds into the input, 0.062-0.092 s, and 0.094-0.114 s alone). On the real PX4 SIH's recorded flights the acceleration and
 attitude flights then agree on the vertical gain (0.865 / 0.855; the setpoint alone: 1.070 /
 0.812), and the drag comes out 0.93-1.07 for SIH's 1.0 on nine real flights (setpoint alone
 0.93-1.20); docs/identify.md, *Vertical*. Without attitude telemetry: ``lag(delay(a_sp,z))``.

@@ -118,10 +118,10 @@ def test_wrong_hover_thrust_parameter_is_recovered_as_gain(tmp_path, truth) -> N
 # where drag acts. Fitted as reported, 20 s path logs give a low drag; with the velocity made
 # position-consistent (identify --velocity-correction, the app's own flight.velocity_correction_s
 # rule) gain and drag come within 10 %. Eight seeds of this fixture's flight measured
-# (docs/identify.md, *Velocity*, *Vertical*): xy rise 0.234-0.258 s (truth 0.242), gain 0.97-1.03,
-# drag 0.93-1.03 (as reported 0.82-0.95); z gain 1.01-1.06, drag 1.00-1.08.
+# (docs/identify.md, *Velocity*, *Vertical*): xy rise 0.232-0.256 s (truth 0.242), gain 0.97-1.03,
+# drag 0.93-1.02 (as reported 0.82-0.94); z gain 1.01-1.06, drag 0.99-1.09.
 # The vertical rise (the thrust's: 0.062 s, as the real PX4 SIH's 0.052-0.062) comes out 0.060 s
-# noise-free, but 0.064-0.090 s with the estimator's noise: the app answers the velocity noise at
+# noise-free, but 0.062-0.092 s with the estimator's noise: the app answers the velocity noise at
 # once and the thrust answers the app within the window, so the input is correlated with the
 # measurement error (closed-loop identification; the real PX4 SIH's compensated path logs give
 # 0.068-0.104 s the same way). Nothing written depends on it while the vertical is faster than the

@@ -10,10 +10,11 @@ Skipped unless an environment variable points at a SITL build (CI has none, and 
   beside the source tree), built as ``../shared/notes/ardupilot-sitl.md`` says.
 
 Each flight is ``pf-offboard fly --takeoff 2`` with the shipped config for that autopilot, as a user
-runs it, measured from activation + 8 s on the autopilot's estimate. PX4 SIH flies five laps:
-over two, the speed error depends on which 13 s of EKF2's noise the window sees (3.9-5.5 cm/s
-with the app started 3-35 s after PX4's boot, in every output mode; README), over five it is
-4.4-5.0. ArduCopter flies two. Targets: cross-track RMS <= 5 cm, speed error RMS <= 5 cm/s, |mean|
+runs it, measured from activation + 8 s on the autopilot's estimate. PX4 SIH flies five laps,
+judged over all five and over its first two (the window of a ``--laps 2`` flight): over two, the
+speed error depends on which 13 s of EKF2's noise the window sees (3.5-4.7 cm/s with the app
+started 3-35 s after PX4's boot, in every output mode; README), over five it is 3.84-3.85
+(2026-11-25). ArduCopter flies two. Targets: cross-track RMS <= 5 cm, speed error RMS <= 5 cm/s, |mean|
 <= 2 cm/s. These run on the wall clock (the autopilots' own speed factor 1): about 1.5 min each.
 """
 
@@ -41,14 +42,31 @@ ARDUCOPTER = os.environ.get("PF_OFFBOARD_ARDUCOPTER")
 SETTLE_S = 8.0
 
 
-def _figures(log_dir: Path) -> tuple[float, float, float]:
-    """(cross-track RMS m, speed error RMS m/s, mean speed error m/s) from activation + 8 s."""
+def _figures(log_dir: Path, laps: float | None = None) -> tuple[float, float, float]:
+    """(cross-track RMS m, speed error RMS m/s, mean speed error m/s) from activation + 8 s, to the
+    end of the flight or (``laps``) to where that many laps of net progress were done: the window
+    a ``--laps`` flight of that many laps measures."""
     recs = [r for r in read_steplog(log_dir / "flight.csv") if r.mode == "following"]
+    if laps is not None:
+        recs = recs[: _laps_done_index(np.array([r.eta1_m for r in recs]), laps)]
     late = [r for r in recs if r.time_s >= recs[0].time_s + SETTLE_S]
     assert late and late[-1].time_s - late[0].time_s > 10.0, "too short a flight to measure"
     ct = np.array([r.cross_track_m for r in late])
     err = np.array([r.eta2_m_s - r.speed_ref_m_s for r in late])
     return float(np.sqrt(np.mean(ct**2))), float(np.sqrt(np.mean(err**2))), float(np.mean(err))
+
+
+def _laps_done_index(eta1_m: np.ndarray, laps: float) -> int:
+    """Index of the first sample after ``laps`` laps of net progress along a closed path (its
+    arclength wraps at the path's length, taken as the span the flight covered)."""
+    length = float(eta1_m.max() - eta1_m.min())
+    step = np.diff(eta1_m)
+    step[step > 0.5 * length] -= length  # a wrap, either way round
+    step[step < -0.5 * length] += length
+    progress = np.abs(np.concatenate(([0.0], np.cumsum(step))))
+    done = np.flatnonzero(progress >= laps * length)
+    assert len(done), f"fewer than {laps} laps flown"
+    return int(done[0])
 
 
 def _fly(log_dir: Path, connect: str, config: str, laps: int, *flags: str) -> tuple[float, float, float]:
@@ -99,25 +117,29 @@ def test_px4_sih_meets_issue_8s_targets(tmp_path: Path, output: str) -> None:
     with _running(["../bin/px4", "-d"], rootfs, tmp_path / "px4.log"):
         figures = _fly(tmp_path / "log", "udpin:127.0.0.1:14540", "px4-sih", 5, "--output", output)
     _check(*figures, f"PX4 SIH, {output}, five laps")
+    _check(*_figures(tmp_path / "log", laps=2), f"PX4 SIH, {output}, its first two laps")
     _check_identify(tmp_path / "log" / "flight.tlog", output)
 
 
 def _check_identify(tlog: Path, output: str) -> None:
-    """identify on the flight's own log, with the velocity made position-consistent as the app
-    flew it, finds SIH's physical drag (SIH_KDV 1 N/(m/s) on 1 kg: 1.0 1/s): horizontally within
-    10 % (five-lap flights: 1.03-1.06), vertically within 20 % (1.07-1.17: EKF2's vertical velocity
-    is not biased like its horizontal one, and the correction adds the height estimate's wander;
-    as reported 0.97-1.02). The vertical is fitted along the measured tilt and answers before the
-    horizontal (not comparable in a rates log, whose horizontal fit is the thrust path's)."""
+    """identify on the flight's own log finds SIH's physical drag (SIH_KDV 1 N/(m/s) on 1 kg:
+    1.0 1/s) within 10 %: horizontally with the velocity made position-consistent as the app flew
+    it (five-lap flights: 1.03-1.07; EKF2's horizontal velocity is biased, as reported 0.91-0.96),
+    vertically as reported (0.96-1.03; EKF2's vertical velocity is not biased like its horizontal
+    one, and the correction adds the height estimate's wander: 1.07-1.21). The vertical is fitted
+    along the measured tilt and answers before the horizontal (not comparable in a rates log, whose
+    horizontal fit is the thrust path's)."""
     from pf_offboard.identify import identify, load_log
 
     ident = identify(load_log(tlog, velocity_correction_s=0.3).segments)
+    z_reported = identify(load_log(tlog).segments).z
     xy, z = ident.xy, ident.z
     print(f"identify ({output}): xy rise {xy.rise_63_s:.3f} s gain {xy.gain:.3f} drag {xy.drag_1_s:.3f}; "
-          f"z rise {z.rise_63_s:.3f} s gain {z.gain:.3f} drag {z.drag_1_s:.3f} (tilt {z.measured_tilt_share:.2f})")  # fmt: skip
+          f"z rise {z.rise_63_s:.3f} s gain {z.gain:.3f} drag {z.drag_1_s:.3f} (tilt {z.measured_tilt_share:.2f}); "
+          f"z as reported: drag {z_reported.drag_1_s:.3f}")  # fmt: skip
     assert z.measured_tilt_share == 1.0
     assert xy.drag_1_s == pytest.approx(1.0, rel=0.10)
-    assert z.drag_1_s == pytest.approx(1.0, rel=0.20)
+    assert z_reported.drag_1_s == pytest.approx(1.0, rel=0.10)
     assert xy.r2 > 0.85 and z.r2 > 0.85
     if output != "rates":
         assert z.rise_63_s < xy.rise_63_s
