@@ -411,8 +411,9 @@ def _yaw(data: Any, frame: str, closed: bool) -> YawSpec:
 
 def _limits(data: Any) -> Limits:
     d = _section(
-        data, "limits", ("max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s", "max_tilt_rate_rad_s")
-    )
+        data, "limits",
+        ("max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s", "max_tilt_rate_rad_s", "max_tangential_accel_m_s2"),
+    )  # fmt: skip
     default = Limits()
     g = GRAVITY_M_S2
     tilt = _number(d, "max_tilt_deg", "limits.max_tilt_deg", default.max_tilt_deg, MIN_TILT_DEG, 80.0)
@@ -427,7 +428,11 @@ def _limits(data: Any) -> Limits:
     rate = _number(
         d, "max_tilt_rate_rad_s", "limits.max_tilt_rate_rad_s", default.max_tilt_rate_rad_s, 0.1, 100.0, nullable=True
     )
-    return Limits(tilt, tmin, tmax, vapp, rate)  # type: ignore[arg-type]
+    # null: no bound on the speed loop's correction (the paper's ideal inner loop)
+    acc_t = _number(
+        d, "max_tangential_accel_m_s2", "limits.max_tangential_accel_m_s2", default.max_tangential_accel_m_s2, 0.1, 100.0, nullable=True
+    )
+    return Limits(tilt, tmin, tmax, vapp, rate, acc_t)  # type: ignore[arg-type]
 
 
 def _flight(data: Any) -> FlightConfig:

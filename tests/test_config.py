@@ -211,6 +211,7 @@ NUMERIC_FIELDS = [
     ("limits", "max_thrust_m_s2"),
     ("limits", "max_approach_speed_m_s"),
     ("limits", "max_tilt_rate_rad_s"),
+    ("limits", "max_tangential_accel_m_s2"),
     ("flight", "setpoint_rate_hz"),
     ("flight", "state_timeout_s"),
     ("flight", "hover_thrust"),
@@ -253,7 +254,7 @@ def test_every_numeric_field_is_in_the_schema():
     covered = {k[-1] for k in NUMERIC_FIELDS}
     schema = {f.name for f in fields(FlightConfig) if f.type in ("float", "float | None")}
     schema |= {f.name for f in fields(Limits)}
-    assert len(schema) == 12
+    assert len(schema) == 13
     assert schema <= covered, schema - covered
 
 

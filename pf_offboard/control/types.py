@@ -95,6 +95,14 @@ class Limits:
     shaped (square-root law beyond ``J/kd^2``) so that the demand never swings faster than that;
     near the path the paper's linear laws act unchanged. Choose about 1/3-1/2 of what the vehicle
     really slews. ``None``: no shaping (the paper's laws everywhere; ideal inner loop only).
+
+    ``max_tangential_accel_m_s2`` bounds the tangential (speed) loop's correction ``|u_eta|``
+    (m/s², a feed-forward such as a speed profile's comes on top): how hard the vehicle may speed
+    up or brake to reach eta2_ref. Without it a vehicle at rest on the path starts along it with
+    the whole tilt budget at once: a 46-50 deg tilt command at 1.5 m/s on the figure-eight, which
+    tripped the tilt watchdog on a real ArduCopter SITL (so did 3 m/s²; 1.5 flew it). Stateless,
+    so the law stays time-invariant and the path invariant. ``None``: no bound (the paper's ideal
+    inner loop).
     """
 
     max_tilt_deg: float = 35.0
@@ -102,6 +110,7 @@ class Limits:
     max_thrust_m_s2: float = 20.0
     max_approach_speed_m_s: float = 2.0
     max_tilt_rate_rad_s: float | None = 2.0
+    max_tangential_accel_m_s2: float | None = 1.5
 
     def __post_init__(self) -> None:
         for name in ("max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s"):
@@ -110,6 +119,10 @@ class Limits:
             rate = _finite("max_tilt_rate_rad_s", self.max_tilt_rate_rad_s)
             if not 0.1 <= rate <= 100.0:
                 raise InputError("max_tilt_rate_rad_s", f"must be in [0.1, 100] rad/s (or None: no slew limit), got {rate}")
+        if self.max_tangential_accel_m_s2 is not None:
+            acc = _finite("max_tangential_accel_m_s2", self.max_tangential_accel_m_s2)
+            if not 0.1 <= acc <= 100.0:
+                raise InputError("max_tangential_accel_m_s2", f"must be in [0.1, 100] m/s^2 (or None: no bound), got {acc}")
         if not 0.0 < self.max_tilt_deg <= 80.0:
             raise InputError("max_tilt_deg", f"must be in (0, 80] deg, got {self.max_tilt_deg}")
         # > 0: at zero thrust the attitude (body z along f) is undefined

@@ -322,11 +322,13 @@ def test_transversal_correction_is_delivered_in_full_while_tangential_gives_way(
     paper's PD -kp e - kd e_dot. With the default slew limit it is that PD inside the linear
     neighbourhood (e < 2J/(kd kp) = 0.5 mm, |dv| < J/kd^2 = 7 mm/s; 0.2 mm off), and the square-root
     law's smaller value 3 mm off; tilt and thrust limits are tighter there (20 deg, 12 m/s^2) so
-    that the (also slew-limited, 7.7 m/s^2) tangential demand exceeds what is left."""
+    that the (also slew-limited, 7.7 m/s^2) tangential demand exceeds what is left. The tangential
+    bound (max_tangential_accel_m_s2) is off here: it is the allocation under test."""
     f = PathFollower(paper_path, speed=1.5, limits=Limits(
             max_tilt_deg=max_tilt_deg,
             max_thrust_m_s2=20.0 if tilt_rate is None else 12.0,
             max_tilt_rate_rad_s=tilt_rate,
+            max_tangential_accel_m_s2=None,
         ),
     )
     lam = 0.25 * paper_path.lam_max

@@ -67,8 +67,9 @@ def test_velocity_loop_shape():
 
 
 def test_none_is_the_paper_law():
-    """Without the slew limit the transversal correction is the paper's nested PD at any size."""
-    law = ControlLaw(Gains(), Limits(max_tilt_rate_rad_s=None, max_tilt_deg=80.0, max_thrust_m_s2=100.0))
+    """Without the slew limit (and the tangential bound) the law is the paper's nested PD at any size."""
+    limits = Limits(max_tilt_rate_rad_s=None, max_tilt_deg=80.0, max_thrust_m_s2=100.0, max_tangential_accel_m_s2=None)
+    law = ControlLaw(Gains(), limits)
     kp, kd = law.kp, law.kd
     ux, uy, reduced, _ = law.transversal(0.001, 0.03, -0.0005, 0.0)
     assert not reduced

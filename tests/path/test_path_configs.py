@@ -48,7 +48,9 @@ def test_schema_keys(name):
     for g in raw["gains"].values():
         assert set(g) == {"bandwidth_hz", "damping"}
     assert raw["yaw"]["mode"] in ("constant", "tangent", "table")
-    assert set(raw["limits"]) == {"max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s"}
+    # max_tangential_accel_m_s2: null where the speed loop's correction is left unbounded
+    base = {"max_tilt_deg", "min_thrust_m_s2", "max_thrust_m_s2", "max_approach_speed_m_s"}
+    assert base <= set(raw["limits"]) <= base | {"max_tangential_accel_m_s2"}
     # velocity_correction_s: paper.yaml pins it off (the paper's exact state)
     assert {"output_mode", "setpoint_rate_hz"} <= set(raw["flight"]) <= {"output_mode", "setpoint_rate_hz", "velocity_correction_s"}
 
