@@ -255,6 +255,11 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None, on_start:
 
         make_dir(args.log_dir, "--log-dir")  # an unwritable log directory is bad input: found before connecting
     stream = status_stream if status_stream is not None else sys.stderr
+    from pf_offboard.control.tuning import real_vehicle_warning
+
+    caution = real_vehicle_warning(config.gains, config.vehicle, config.compensation.enabled)
+    if caution:  # before connecting: the paper's gains limit-cycle on a real inner loop
+        print(f"pf-offboard fly: warning: {caution}", file=stream)
     try:
         return asyncio.run(_fly(args, endpoint, config, settings, stream, fence, signing_key, on_start))
     except LinkError as exc:

@@ -47,6 +47,17 @@ def _plant(lag_s: float, delay_s: float, order: int):  # type: ignore[no-untyped
     return p
 
 
+def _transversal_loop(bandwidth_hz: float, damping: float, plant):  # type: ignore[no-untyped-def]
+    """Open loop of the transversal PD (kp = w², kd = 2 ζ w) on ``plant``."""
+    w = 2.0 * math.pi * bandwidth_hz
+    return lambda om: (w * w + 2.0 * damping * w * 1j * om) * plant(om)
+
+
+def _tangential_loop(kd_t: float, plant):  # type: ignore[no-untyped-def]
+    """Open loop of the tangential P (``kd_t``, 1/s) on ``plant``."""
+    return lambda om: kd_t * plant(om)
+
+
 def _largest(margin_deg: float, loop_at, lo: float, hi: float) -> float:  # type: ignore[no-untyped-def]
     """Largest parameter in [lo, hi] whose loop keeps the margin (margin falls with it)."""
     if phase_margin_deg(loop_at(hi)) >= margin_deg:
@@ -60,6 +71,45 @@ def _largest(margin_deg: float, loop_at, lo: float, hi: float) -> float:  # type
         else:
             hi = mid
     return lo
+
+
+# Below this phase margin (either loop) on a typical multicopter, `fly` warns before it connects
+# (paper gains: -177 deg without compensation, -25 deg with it; `gains: auto` keeps 30 deg).
+WARN_MARGIN_DEG = 15.0
+
+
+def margins_deg(gains: Gains, model: VehicleModel, compensated: bool) -> tuple[float, float]:
+    """(transversal, tangential) phase margins (deg) of ``gains`` on ``model``'s horizontal inner
+    loop: the lag always in the loop, the delay too unless ``compensated`` (the compensator then
+    predicts it). A negative margin is a loop that oscillates (the law's limits bound it into a
+    limit cycle)."""
+    lag = max(model.accel_lag_xy_s, model.accel_lag_z_s)
+    r = UNMODELLED_DELAY_SHARE * model.accel_delay_s if compensated else model.accel_delay_s
+    return (
+        phase_margin_deg(_transversal_loop(gains.transversal_bandwidth_hz, gains.transversal_damping, _plant(lag, r, 2))),
+        phase_margin_deg(_tangential_loop(gains.tangential_kd, _plant(lag, r, 1))),
+    )
+
+
+def real_vehicle_warning(gains: Gains, model: VehicleModel, compensated: bool) -> str | None:
+    """One line saying why these gains will not fly a real multicopter well, or None.
+
+    Judged on ``model`` when it has a lag or delay (an identified vehicle), else on
+    :meth:`VehicleModel.typical` (lag 0.1 s, delay 0.1 s): no real autopilot's inner loop is the
+    ideal one the paper assumes."""
+    ideal = model.accel_lag_xy_s == 0.0 and model.accel_lag_z_s == 0.0 and model.accel_delay_s == 0.0
+    judged = VehicleModel.typical() if ideal else model
+    transversal, tangential = margins_deg(gains, judged, compensated)
+    if min(transversal, tangential) >= WARN_MARGIN_DEG:
+        return None
+    on = (f"a typical PX4/ArduPilot inner loop (lag {judged.accel_lag_xy_s:g} s, delay {judged.accel_delay_s:g} s; "
+          "the config's vehicle: section is the paper's ideal one, which no real multicopter has)"
+          if ideal else f"the config's vehicle model (lag {model.accel_lag_xy_s:g} s, delay {model.accel_delay_s:g} s)")  # fmt: skip
+    return (f"gains (transversal {gains.transversal_bandwidth_hz:g} Hz, tangential {gains.tangential_bandwidth_hz:g} Hz) "
+            f"leave {transversal:.0f} / {tangential:.0f} deg of phase margin on {on}, "
+            f"{'with' if compensated else 'without'} the inner-loop compensation: on a real vehicle expect a limit cycle or "
+            "an envelope breach (they suit an ideal inner loop such as sitl-mock --vehicle fast). For a real vehicle use "
+            "--config px4-sih / arducopter, or gains: auto with a vehicle: section from pf-offboard identify")  # fmt: skip
 
 
 def gains_for_vehicle(
@@ -80,12 +130,10 @@ def gains_for_vehicle(
     z = TRANSVERSAL_DAMPING
 
     def transversal(f_hz: float):  # type: ignore[no-untyped-def]
-        w = 2.0 * math.pi * f_hz
-        return lambda om: (w * w + 2.0 * z * w * 1j * om) * pos_plant(om)
+        return _transversal_loop(f_hz, z, pos_plant)
 
     def tangential(f_hz: float):  # type: ignore[no-untyped-def]
-        kd = 2.0 * TANGENTIAL_DAMPING * 2.0 * math.pi * f_hz
-        return lambda om: kd * vel_plant(om)
+        return _tangential_loop(2.0 * TANGENTIAL_DAMPING * 2.0 * math.pi * f_hz, vel_plant)
 
     f_tr = _largest(phase_margin_deg_min, transversal, 0.05, PAPER.transversal_bandwidth_hz)
     # The speed loop has its own margin, not the transversal bandwidth as a cap: a real EKF's

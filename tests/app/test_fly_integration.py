@@ -149,8 +149,26 @@ def test_no_heartbeat_times_out(tmp_path, capsys) -> None:
                      "--heartbeat-timeout", "0.5", "--log-dir", str(tmp_path)])  # fmt: skip
         elapsed = time.monotonic() - t0
     assert code == 3
-    assert "no HEARTBEAT" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "no HEARTBEAT" in err
     assert elapsed < 5.0
+    # configs/paper.yaml's gains assume an ideal inner loop: said before connecting, once
+    warning = [line for line in err.splitlines() if line.startswith("pf-offboard fly: warning: gains (transversal 6 Hz")]
+    assert len(warning) == 1 and "phase margin" in warning[0] and "--config px4-sih / arducopter" in warning[0]
+    assert err.index(warning[0]) < err.index("no HEARTBEAT")
+
+
+def test_no_real_vehicle_warning_for_a_config_made_for_one(tmp_path, capsys) -> None:
+    import socket
+
+    from pf_offboard.cli import main
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
+        silent.bind(("127.0.0.1", 0))
+        code = main(["fly", "--connect", f"udpout:127.0.0.1:{silent.getsockname()[1]}", "--config", "arducopter",
+                     "--airborne", "--heartbeat-timeout", "0.5", "--log-dir", str(tmp_path)])  # fmt: skip
+    assert code == 3
+    assert "warning: gains" not in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("output", ["rates", "attitude"])
@@ -298,6 +316,10 @@ def test_ardupilot_acceleration_is_refused_with_the_mode_to_use(tmp_path, capsys
     err = capsys.readouterr().err
     assert code == 2, err
     lines = [line for line in err.splitlines() if line.strip()]
+    # the paper's gains on the fast mock: before connecting, fly warns they suit an ideal inner loop
+    warnings = [line for line in lines if line.startswith("pf-offboard fly: warning: gains")]
+    lines = [line for line in lines if line not in warnings]
+    assert len(warnings) <= 1
     assert len(lines) == 1 and "--output" in lines[0] and "use --output attitude" in lines[0].lower(), err
     assert "PSC_JERK" in lines[0] and "--experimental-output" in lines[0]
     assert "Traceback" not in err
