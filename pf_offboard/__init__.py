@@ -6,6 +6,13 @@ The pure core is importable without any I/O::
     follower = PathFollower(Path.from_waypoints(points, closed=True), speed=1.5)
     cmd = follower.update(position_enu_m, velocity_enu_m_s)
 
+A companion program flies a vehicle with the asyncio API (docs/api.md)::
+
+    async with pf_offboard.connect("udp://:14540") as vehicle:
+        await vehicle.takeoff(2.0)
+        result = await vehicle.follow("field.yaml", laps=2)
+        await vehicle.hand_back()
+
 Names are imported lazily (PEP 562) so that ``pf-offboard --help`` and light modules such as
 :mod:`pf_offboard.frames` do not pay for numpy/scipy set-up they do not use.
 """
@@ -31,12 +38,37 @@ _EXPORTS: dict[str, str] = {
     "Config": "pf_offboard.config",
     "load_config": "pf_offboard.config",
     "parse_config": "pf_offboard.config",
+    "connect": "pf_offboard.api",
+    "Vehicle": "pf_offboard.api",
+    "FollowResult": "pf_offboard.api",
+    "Progress": "pf_offboard.api",
+    "FlightError": "pf_offboard.errors",
+    "OperatorTakeover": "pf_offboard.errors",
+    "EnvelopeBreach": "pf_offboard.errors",
+    "CrashDetected": "pf_offboard.errors",
+    "LinkLost": "pf_offboard.errors",
+    "CommandRefused": "pf_offboard.errors",
+    "AutopilotFailsafe": "pf_offboard.errors",
+    "FlightInterrupted": "pf_offboard.errors",
+    "InputError": "pf_offboard.errors",
 }
 
 __all__ = sorted(_EXPORTS)
 
 if TYPE_CHECKING:
+    from pf_offboard.api import FollowResult, Progress, Vehicle, connect
     from pf_offboard.config import Config, load_config, parse_config
+    from pf_offboard.errors import (
+        AutopilotFailsafe,
+        CommandRefused,
+        CrashDetected,
+        EnvelopeBreach,
+        FlightError,
+        FlightInterrupted,
+        InputError,
+        LinkLost,
+        OperatorTakeover,
+    )
     from pf_offboard.control import Command, Gains, Limits, PathFollower, Saturation, TransverseState, YawSpec
     from pf_offboard.path import Path, Projector
 

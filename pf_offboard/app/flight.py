@@ -28,7 +28,7 @@ from typing import Any, TextIO
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-from pf_offboard.app.commands import Commander, CommandTiming, ModeChange, ModeWatch
+from pf_offboard.app.commands import Commander, CommandRefusedError, CommandTiming, ModeChange, ModeWatch
 from pf_offboard.app.dialects import Dialect, dialect_for
 from pf_offboard.app.encoders import position_setpoint, yaw_of
 from pf_offboard.app.estimator import StateEstimate, flight_clock_s
@@ -74,6 +74,7 @@ class FlightOptions:
     ready_timeout_s: float = 120.0
     takeoff_timeout_s: float | None = None  # None: 30 s + 5 s per metre of take-off height
     progress_every_s: float = 5.0  # while waiting for readiness: one progress line this often (wall clock)
+    follow: bool = True  # False: take off only, then hand back (the launch must be "takeoff")
 
 
 class Flight:
@@ -93,7 +94,9 @@ class Flight:
         clock: Callable[[], float] = time.monotonic,
         monitor: EnvelopeMonitor | None = None,
         dialect: Dialect | None = None,
+        heartbeat: Any = None,
     ) -> None:
+        """``heartbeat``: the autopilot's latest HEARTBEAT (default: the link's first)."""
         self.link = link
         self.profile = profile
         self.dialect = dialect if dialect is not None else dialect_for(profile)
@@ -120,6 +123,7 @@ class Flight:
         self.activation_time_s: float | None = None
         self._activation_clock_s: float | None = None  # the same instant on the estimator's continuous clock
         self.result: FlightResult | None = None
+        self.error: LinkError | None = None  # what ended the flight, when a LinkError did
         self.last_step: Step | None = None
         self.steps = 0
         self._last_setpoint: Any = None
@@ -137,8 +141,9 @@ class Flight:
         self._safe_msg: Any = None
         # before activation, stream the follower's own (inactive) setpoints as proof of life
         self._stream_follow_before_active = False
-        if link.first_heartbeat is not None:  # mode and armed state known from the start
-            self._on_heartbeat(link.first_heartbeat)
+        heartbeat = heartbeat if heartbeat is not None else link.first_heartbeat
+        if heartbeat is not None:  # mode and armed state known from the start
+            self._on_heartbeat(heartbeat)
 
     # ------------------------------------------------------------------ what the others read
     @property
@@ -175,6 +180,7 @@ class Flight:
             if self.phase is Phase.HANDING_BACK:
                 await self._hand_back()
         except LinkError as exc:
+            self.error = self.error or exc
             if self.phase in INTERRUPTING or self.result is not None:
                 pass  # safing, taken over or ended: handled below / already decided
             elif self.waiter.stop.is_set():
@@ -219,13 +225,17 @@ class Flight:
         est = await self._first_state(ready_deadline, need_attitude=opts.launch == "takeoff")
         if opts.launch == "takeoff":
             await self._takeoff(est, ready_deadline)
+            if not opts.follow:
+                self._end_reason = f"take-off to {opts.height_m:g} m held"
+                self.phase = Phase.HANDING_BACK
+                return
             self._stream_follow_before_active = True
             self._activate()
             return
         self._stream_follow_before_active = True
         if opts.launch == "airborne":
             if not self.modes.armed:
-                raise LinkError("--airborne: the vehicle is not armed (is it flying?)")
+                raise CommandRefusedError("--airborne: the vehicle is not armed (is it flying?)", mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, None)
             if not self._neutral_allowed():
                 # already in OFFBOARD / GUIDED: whatever we send flies at once, so engage now
                 self._engage("activated (airborne, already in " + self.profile.offboard.name + ")")

@@ -15,7 +15,6 @@ import gc
 import math
 import signal
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from collections.abc import Awaitable, Callable
@@ -176,7 +175,7 @@ def envelope_fence(config: Any) -> Any:
     return fence
 
 
-def _rate_bound(config: Any) -> float | None:
+def rate_bound(config: Any) -> float | None:
     """safety.max_body_rate_rad_s when the envelope is on (the encoder bounds rates-mode setpoints)."""
     safety = getattr(config, "safety", None)
     return safety.max_body_rate_rad_s if safety is not None and safety.enabled else None
@@ -342,120 +341,50 @@ async def _fly(
     request: FlyRequest, endpoint: Any, config: Any, settings: FlightSettings, stream: TextIO, fence: Any = None,
     signing_key: bytes | None = None, on_start: Callable[[Any], None] | None = None,
 ) -> FlyOutcome:  # fmt: skip
-    from pf_offboard.app.dialects import dialect_for
-    from pf_offboard.app.encoders import Encoder
-    from pf_offboard.app.estimator import Estimator
-    from pf_offboard.app.flight import Flight, FlightOptions
-    from pf_offboard.app.link import Link
-    from pf_offboard.app.pipeline import Pipeline
-    from pf_offboard.app.profiles import select_profile
-    from pf_offboard.app.rules import EndSpec
-    from pf_offboard.control import controller_from_config
-    from pf_offboard.logs.flightlog import FlightLog
-    from pf_offboard.logs.summary import SummaryAccumulator
-    from pf_offboard.safety import EnvelopeMonitor, SafetyConfig
+    """``fly`` as a client of the API (:mod:`pf_offboard.api`): connect, one follow, report."""
+    from pf_offboard.api.vehicle import ConnectSettings, FlightHooks, FollowSettings, Vehicle
+    from pf_offboard.errors import FlightError
 
-    # a path in latitude / longitude is built once the vehicle's origin is known (below)
-    follower = controller_from_config(config) if config.path.geodetic is None else None
-    link = Link.open(endpoint, signing_key=signing_key)
-    # state that waited in the socket longer than the state timeout is never flown
-    link.max_state_age_s = settings.state_timeout_s
-    summary_acc = SummaryAccumulator()  # running sums: the steps themselves go to the CSV only
-    log: FlightLog | None = None
-    try:
-        target = await link.wait_heartbeat(request.heartbeat_timeout_s, request.target_system)
-        profile = select_profile(request.autopilot, target.autopilot)
-        dialect = dialect_for(profile)
-        refusal = dialect.output_refusal(settings.output_mode)
-        if refusal:
-            if not request.experimental_output:
-                # before the log, the reader and any command or setpoint
-                raise InputError("--output", f"{settings.output_mode} refused on {profile.name}: {refusal}")
-            print(f"pf-offboard fly: warning: {settings.output_mode} on {profile.name} is experimental: {refusal}", file=stream)
-        link.set_source_system(target.system)
-        log_dir = Path(request.log_dir) if request.log_dir else default_log_dir()
-        try:
-            log = FlightLog.open(log_dir, config_path=request.config_path)
-        except OSError as exc:
-            raise InputError("--log-dir", f"cannot write the logs in {log_dir}: {exc.strerror or exc}") from None
-        flight_log = log
-        link.on_received = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
-        link.on_sent = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
-        if config.path.geodetic is not None:
-            # a path in latitude / longitude: into the vehicle's local frame (its EKF origin), refused
-            # if out of bounds, before any setpoint or command; the log keeps the local way-points
-            from pf_offboard.app.origin import localise_config
+    loop = asyncio.get_running_loop()
+    # SIGTERM (systemd, docker stop) and SIGHUP (the terminal closed) end the flight like Ctrl-C:
+    # hold requested, summary printed, logs closed.
+    stops = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGHUP: "SIGHUP"}
 
-            config = await localise_config(link, config, stream)
-            flight_log.write_config(request.config_path, config)
-            follower = controller_from_config(config)
-        assert follower is not None
-
-        path = follower.path
-        options = FlightOptions(
-            launch=request.launch,
-            height_m=request.height_m,
-            end=EndSpec(laps=request.laps, duration_s=request.duration_s),
-            end_action=settings.end_action,
-            setpoint_rate_hz=settings.setpoint_rate_hz,
-            state_timeout_s=settings.state_timeout_s,
-            status=not request.quiet,
-            ready_timeout_s=request.ready_timeout_s,
-            takeoff_timeout_s=request.takeoff_timeout_s,
-        )
-        encoder = Encoder(
-            settings.output_mode, profile, target.system, target.component,
-            hover_thrust=settings.hover_thrust if settings.hover_thrust is not None else 0.5,
-            time_constant_s=settings.attitude_time_constant_s,
-            max_body_rate_rad_s=_rate_bound(config),
-        )  # fmt: skip
-        pipeline = Pipeline(follower, encoder, Estimator(request.state_source, settings.velocity_correction_s))
-        safety = getattr(config, "safety", None) or SafetyConfig()
-        monitor = EnvelopeMonitor(safety, fence if fence is not None else envelope_fence(config), path.length_m, path.closed)
-        flight = Flight(
-            link, profile, pipeline, options, path.length_m, path.closed, path.lam_max,
-            on_step=lambda step: (flight_log.step(step.record), summary_acc.add(step.record)),  # not kept: flights can be long
-            status_stream=stream, monitor=monitor, dialect=dialect,
-        )  # fmt: skip
-        link.start_reading(flight.on_message)
-        if on_start is not None:
-            on_start(flight)
-
-        async def setup() -> None:
-            requests = stream_requests(request.state_source, settings.setpoint_rate_hz)
-            await flight.commander.request_intervals(requests)
-            # each request three times: idempotent, and a lossy link must not leave HEARTBEAT at 1 Hz
-            # (the lost-HEARTBEAT watchdog counts on it); twice more, not waited for
-            for _ in range(2):
-                for msg_id, rate, _name in requests:
-                    flight.commander.request_interval(msg_id, rate)
-            await prepare_output(flight, dialect, settings, request.set_guid_options, stream, warnings=True)
-
-        loop = asyncio.get_running_loop()
-        # SIGTERM (systemd, docker stop) and SIGHUP (the terminal closed) end the flight like Ctrl-C:
-        # hold requested, summary printed, logs closed.
-        stops = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGHUP: "SIGHUP"}
+    def started(flight: Any) -> None:
         for signum, name in stops.items():
             loop.add_signal_handler(signum, flight.request_stop, f"stop requested ({name})")
         # The path, its caches and pymavlink's tables live for the whole flight: take them out of
         # the cyclic collector's scans so full collections do not stall the 250 Hz loop.
         gc.freeze()
+        if on_start is not None:
+            on_start(flight)
+
+    def ended(flight: Any) -> None:
+        for signum in stops:
+            loop.remove_signal_handler(signum)
+
+    connect = ConnectSettings(endpoint, request.autopilot, request.target_system, request.heartbeat_timeout_s, signing_key, request.quiet)
+    follow = FollowSettings(
+        launch=request.launch, height_m=request.height_m, laps=request.laps, duration_s=request.duration_s,
+        output=settings.output_mode, end_action=settings.end_action, state_source=request.state_source,
+        set_guid_options=request.set_guid_options, experimental_output=request.experimental_output,
+        ready_timeout_s=request.ready_timeout_s, takeoff_timeout_s=request.takeoff_timeout_s,
+        log_dir=request.log_dir or str(default_log_dir()),
+    )  # fmt: skip
+    hooks = FlightHooks(on_start=started, on_end=ended, fence=fence, config_path=request.config_path)
+    async with Vehicle(connect, stream) as vehicle:
         try:
-            result = await run_flight(flight, setup)
-        finally:
-            for signum in stops:
-                loop.remove_signal_handler(signum)
-    finally:
-        link.close()
-        if log is not None:
-            log.close()
-    assert log is not None
-    summary = summary_acc.result() if summary_acc.steps else None
-    _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, flight)
-    _write_summary_json(request.json, result.exit_code, result.reason, summary, log.paths.tlog.parent, config)
+            result = await vehicle._run(config, follow, hooks)
+        except FlightError as exc:
+            if exc.result is None:
+                raise
+            result = exc.result
+    flight = result.flight
+    _report(stream, result.reason, result.exit_code, result.summary, result.log_dir, flight)
+    _write_summary_json(request.json, result.exit_code, result.reason, result.summary, result.log_dir, result.config)
     return FlyOutcome(
-        result.exit_code, result.reason, log.paths.tlog.parent, summary, result.activation_time_s, result.breach,
-        result.breach_time_s, link.counters, pipeline.estimator,
+        result.exit_code, result.reason, result.log_dir, result.summary, result.activation_time_s, result.breach,
+        result.breach_time_s, result.link_counters, result.estimator,
     )  # fmt: skip
 
 

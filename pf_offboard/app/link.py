@@ -353,11 +353,15 @@ class Link:
         self.stop_reading()
         self.error = LinkError(f"{self.endpoint}: link failed: {exc}")
 
-    async def wait_heartbeat(self, timeout_s: float, target_system: int | None = None) -> VehicleId:
+    async def wait_heartbeat(
+        self, timeout_s: float, target_system: int | None = None, announce: Callable[[str], None] | None = None,
+        progress_every_s: float = 5.0,
+    ) -> VehicleId:  # fmt: skip
         """Wait for an autopilot HEARTBEAT (from ``target_system`` if given); :class:`LinkError` on timeout.
 
         We announce ourselves with our own HEARTBEAT every second meanwhile, because a UDP
-        autopilot (``udpout``) only learns our address from what we send.
+        autopilot (``udpout``) only learns our address from what we send. ``announce(line)``: told
+        that we wait (with the time waited every ``progress_every_s``) and what answered.
         """
         loop = asyncio.get_running_loop()
         found: asyncio.Future[VehicleId] = loop.create_future()
@@ -377,9 +381,17 @@ class Link:
             found.set_result(VehicleId(msg.get_srcSystem(), msg.get_srcComponent(), msg.autopilot, msg.type))
 
         self.start_reading(handler)
-        deadline = loop.time() + timeout_s
+        start = loop.time()
+        deadline = start + timeout_s
+        next_progress = start + progress_every_s
+        if announce is not None:
+            announce(f"waiting for a HEARTBEAT on {self.endpoint} (up to {timeout_s:g} s)")
         try:
             while not found.done():
+                now = loop.time()
+                if announce is not None and now >= next_progress:
+                    next_progress = now + progress_every_s
+                    announce(f"waiting for a HEARTBEAT on {self.endpoint}: {now - start:.0f} s of up to {timeout_s:g} s")
                 self.send_heartbeat()
                 remaining = deadline - loop.time()
                 if remaining <= 0:
@@ -397,6 +409,10 @@ class Link:
             hint = f" ({refused} frames refused: unsigned or signed with another key)" if refused else ""
             raise LinkError(f"no HEARTBEAT from an autopilot on {self.endpoint} within {timeout_s:g} s{hint}")
         self.target = found.result()
+        if announce is not None:
+            t = self.target
+            announce(f"HEARTBEAT from system {t.system} component {t.component} (autopilot {t.autopilot}) "
+                     f"after {loop.time() - start:.1f} s")  # fmt: skip
         # UDP: lock to the address the autopilot spoke from (the first peer): the same ids from any
         # other address are a second sender, refused from now on.
         self.peer = found_addr
