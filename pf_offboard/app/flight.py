@@ -654,7 +654,10 @@ class Flight:
                 if why:
                     self._enter_safing(EXIT_LINK, why)
                     continue
-            preflight = phase is Phase.PREFLIGHT and self._neutral_allowed()
+            # before the stream of our own setpoints started (the first state sample may have come
+            # before anything was sent): the neutral setpoint, as in preflight
+            idle = phase is Phase.PREFLIGHT or (phase is Phase.WAITING and self._last_setpoint is None)
+            preflight = idle and self._neutral_allowed()
             if preflight and (self._last_setpoint is None or now - self._last_send_wall >= period):
                 self._send_neutral()
             elif self._last_setpoint is not None and now - self._last_send_wall >= KEEPALIVE_S:

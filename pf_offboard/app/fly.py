@@ -31,8 +31,9 @@ FROM_CONFIG: Any = object()
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--connect", required=True, metavar="ENDPOINT",
-                        help="udpin:HOST:PORT | udpout:HOST:PORT | tcp:HOST:PORT | serial:DEVICE:BAUD "
-                             "(PX4 SITL: udpin:0.0.0.0:14540; ArduPilot SITL: tcp:127.0.0.1:5760)")  # fmt: skip
+                        help="udp://:14540 | udpout://HOST:PORT | tcp://HOST:PORT | serial:///dev/ttyACM0:921600 (MAVSDK), or "
+                             "udpin:HOST:PORT | udpout:HOST:PORT | tcp:HOST:PORT | tcpin:HOST:PORT | /dev/ttyACM0,921600 "
+                             "(pymavlink); PX4 SITL: udp://:14540; ArduPilot SITL: tcp://127.0.0.1:5760")  # fmt: skip
     parser.add_argument("--config", required=True, metavar="YAML", help="config file, or a shipped config's name (pf-offboard configs)")
     launch = parser.add_mutually_exclusive_group(required=True)
     launch.add_argument("--takeoff", type=float, nargs="?", const=FROM_CONFIG, metavar="H",

@@ -37,13 +37,20 @@ MAV_TYPE_GCS = 6
 MAV_AUTOPILOT_INVALID = 8
 
 _HOST_RE = re.compile(r"^[A-Za-z0-9.\-]+$")
-KINDS = ("udpin", "udpout", "tcp", "serial")
+KINDS = ("udpin", "udpout", "tcp", "tcpin", "serial")
+# how users write endpoints (MAVSDK URLs, pymavlink / MAVProxy strings) -> our kinds; see docs/api.md
+_URL_SCHEMES = {"udp": "udpin", "udpin": "udpin", "udpout": "udpout", "tcp": "tcp", "tcpout": "tcp", "tcpin": "tcpin", "serial": "serial"}
+_PREFIXES = {"udp": "udpin", "udpin": "udpin", "udpout": "udpout", "tcp": "tcp", "tcpin": "tcpin", "serial": "serial"}
+DEFAULT_BAUD = 115200
+FORMS = ("udp://:14540 (listen), udpout://HOST:PORT, tcp://HOST:PORT, serial:///dev/ttyACM0:921600 (MAVSDK); "
+         "udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT, /dev/ttyACM0,921600 (pymavlink / MAVProxy)")  # fmt: skip
 
 
 @dataclass(frozen=True)
 class Endpoint:
-    """A parsed ``--connect`` endpoint. ``address`` is host (udp/tcp) or device path (serial);
-    ``port`` is the UDP/TCP port or the serial baud rate."""
+    """A parsed ``--connect`` endpoint. ``kind``: udpin (listen) | udpout (send to) | tcp (connect)
+    | tcpin (accept) | serial; ``address`` is host (udp/tcp) or device path (serial); ``port`` is
+    the UDP/TCP port or the serial baud rate."""
 
     kind: str
     address: str
@@ -60,28 +67,81 @@ class Endpoint:
 
 
 def parse_endpoint(text: str) -> Endpoint:
-    """Parse ``udpin:HOST:PORT``, ``udpout:HOST:PORT``, ``tcp:HOST:PORT`` or ``serial:DEVICE:BAUD``.
+    """Parse an endpoint as users write it. Our own form is ``KIND:ADDRESS:PORT`` (``udpin``,
+    ``udpout``, ``tcp``, ``tcpin``, ``serial:DEVICE:BAUD``); MAVSDK URLs (``udp://[HOST]:PORT``
+    listens, ``udpin://``, ``udpout://``, ``tcp://``, ``tcpin://``, ``serial://DEVICE[:BAUD]``) and
+    pymavlink / MAVProxy strings (``udp:HOST:PORT`` listens, ``/dev/ttyACM0,921600``) map onto it.
 
-    Raises :class:`InputError` naming ``--connect`` and what is wrong.
+    Raises :class:`InputError` naming ``--connect``, what is wrong and the forms that work.
     """
     field = "--connect"
-    if not isinstance(text, str) or ":" not in text:
-        raise InputError(field, f"{text!r} is not KIND:ADDRESS:PORT (KIND one of {', '.join(KINDS)})")
-    kind, _, rest = text.partition(":")
-    if kind not in KINDS:
-        raise InputError(field, f"unknown endpoint kind {kind!r} in {text!r}; use one of {', '.join(KINDS)}")
+    if not isinstance(text, str) or not text.strip():
+        raise InputError(field, f"{text!r} is not KIND:ADDRESS:PORT (KIND one of {', '.join(KINDS)}); forms: {FORMS}")
+    text = text.strip()
+    if "://" in text:
+        return _parse_url(text, field)
+    if text.startswith("/") or re.match(r"^COM\d+([,:]|$)", text, re.IGNORECASE):
+        return _serial(text, text, re.split(r"[,:]", text, maxsplit=1)[0] if not text.startswith("/") else text, field)
+    if ":" not in text:
+        raise InputError(field, f"{text!r} is not KIND:ADDRESS:PORT (KIND one of {', '.join(KINDS)}); forms: {FORMS}")
+    prefix, _, rest = text.partition(":")
+    kind = _PREFIXES.get(prefix.lower())
+    if kind is None:
+        raise InputError(field, f"unknown endpoint kind {prefix!r} in {text!r}; use one of {', '.join(KINDS)} ({FORMS})")
+    if kind == "serial":
+        device, sep, number = rest.rpartition(":")
+        if not sep or not device or not number:
+            raise InputError(field, f"{text!r}: expected serial:DEVICE:BAUD (e.g. serial:/dev/ttyACM0:921600)")
+        return _baud(text, device, number, field)
+    return _host_port(text, kind, rest, f"{prefix}:HOST:PORT", field)
+
+
+def _parse_url(text: str, field: str) -> Endpoint:
+    scheme, _, rest = text.partition("://")
+    kind = _URL_SCHEMES.get(scheme.lower())
+    if kind is None:
+        raise InputError(field, f"unknown endpoint scheme {scheme!r} in {text!r}; use {FORMS}")
+    if kind == "serial":
+        # serial:///dev/ttyACM0:921600 (MAVSDK): the device path, then an optional :BAUD
+        return _serial(text, rest, rest, field)
+    host, sep, number = rest.rpartition(":")
+    if not sep or not number:
+        raise InputError(field, f"{text!r}: expected {scheme}://[HOST]:PORT (e.g. {scheme}://:14540 or {scheme}://127.0.0.1:14540)")
+    if not host:
+        if kind in ("udpout", "tcp"):
+            raise InputError(field, f"{text!r}: {scheme}:// needs the HOST to send to, e.g. {scheme}://127.0.0.1:{number}")
+        host = "0.0.0.0"  # listen on every interface, as MAVSDK does
+    return _host_port(text, kind, f"{host}:{number}", f"{scheme}://[HOST]:PORT", field)
+
+
+def _serial(text: str, rest: str, device_hint: str, field: str) -> Endpoint:
+    """``DEVICE``, ``DEVICE:BAUD`` or ``DEVICE,BAUD`` (MAVProxy)."""
+    for sep in (",", ":"):
+        device, found, number = rest.rpartition(sep)
+        if found and device:
+            return _baud(text, device, number, field)
+    if not rest:
+        raise InputError(field, f"{text!r}: expected a serial device, e.g. serial:///dev/ttyACM0:921600 or /dev/ttyACM0,921600")
+    return Endpoint("serial", rest, DEFAULT_BAUD)
+
+
+def _baud(text: str, device: str, number: str, field: str) -> Endpoint:
+    if not number.isdigit():
+        raise InputError(field, f"{text!r}: baud rate {number!r} is not a positive integer (e.g. {device}:921600)")
+    value = int(number)
+    if value <= 0:
+        raise InputError(field, f"{text!r}: baud rate must be positive")
+    return Endpoint("serial", device, value)
+
+
+def _host_port(text: str, kind: str, rest: str, form: str, field: str) -> Endpoint:
     address, sep, number = rest.rpartition(":")
     if not sep or not address or not number:
-        what = "DEVICE:BAUD" if kind == "serial" else "HOST:PORT"
-        raise InputError(field, f"{text!r}: expected {kind}:{what}")
+        hint = " (udpin:0.0.0.0:PORT listens on every interface)" if kind == "udpin" else ""
+        raise InputError(field, f"{text!r}: expected {form}{hint}")
     if not number.isdigit():
-        what = "baud rate" if kind == "serial" else "port"
-        raise InputError(field, f"{text!r}: {what} {number!r} is not a positive integer")
+        raise InputError(field, f"{text!r}: port {number!r} is not a positive integer")
     value = int(number)
-    if kind == "serial":
-        if value <= 0:
-            raise InputError(field, f"{text!r}: baud rate must be positive")
-        return Endpoint(kind, address, value)
     if not 1 <= value <= 65535:
         raise InputError(field, f"{text!r}: port {value} is outside 1..65535")
     if not _HOST_RE.match(address):

@@ -21,6 +21,28 @@ def test_valid_endpoints(text: str, expected: Endpoint) -> None:
     assert str(ep) == text
 
 
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        # MAVSDK URLs
+        ("udp://:14540", Endpoint("udpin", "0.0.0.0", 14540)),
+        ("udp://127.0.0.1:14540", Endpoint("udpin", "127.0.0.1", 14540)),
+        ("udpin://0.0.0.0:14540", Endpoint("udpin", "0.0.0.0", 14540)),
+        ("udpout://127.0.0.1:14580", Endpoint("udpout", "127.0.0.1", 14580)),
+        ("tcp://127.0.0.1:5760", Endpoint("tcp", "127.0.0.1", 5760)),
+        ("tcpin://:5760", Endpoint("tcpin", "0.0.0.0", 5760)),
+        ("serial:///dev/ttyACM0:921600", Endpoint("serial", "/dev/ttyACM0", 921600)),
+        # pymavlink / MAVProxy
+        ("udp:127.0.0.1:14550", Endpoint("udpin", "127.0.0.1", 14550)),
+        ("tcpin:0.0.0.0:5760", Endpoint("tcpin", "0.0.0.0", 5760)),
+        ("/dev/ttyACM0,921600", Endpoint("serial", "/dev/ttyACM0", 921600)),
+        ("/dev/ttyUSB0", Endpoint("serial", "/dev/ttyUSB0", 115200)),
+    ],
+)
+def test_endpoints_as_users_write_them(text: str, expected: Endpoint) -> None:
+    assert parse_endpoint(text) == expected
+
+
 def test_mavutil_urls() -> None:
     assert parse_endpoint("udpin:0.0.0.0:14540").mavutil_url() == "udpin:0.0.0.0:14540"
     assert parse_endpoint("serial:/dev/ttyUSB0:57600").mavutil_url() == "/dev/ttyUSB0"
@@ -31,7 +53,11 @@ def test_mavutil_urls() -> None:
     [
         ("", "KIND:ADDRESS:PORT"),
         ("14540", "KIND:ADDRESS:PORT"),
-        ("udp:127.0.0.1:14540", "unknown endpoint kind 'udp'"),
+        ("foo:127.0.0.1:14540", "unknown endpoint kind 'foo'"),
+        ("http://127.0.0.1:14540", "unknown endpoint scheme 'http'"),
+        ("udp://localhost", "expected udp://[HOST]:PORT"),
+        ("udpout://:14540", "needs the HOST to send to"),
+        ("serial:///dev/ttyACM0:fast", "baud rate 'fast'"),
         ("udpin:14540", "expected udpin:HOST:PORT"),
         ("udpin:127.0.0.1:", "expected udpin:HOST:PORT"),
         ("tcp:127.0.0.1:port", "port 'port' is not a positive integer"),
