@@ -85,6 +85,7 @@ class FollowSettings:
     takeoff_timeout_s: float | None = None
     log_dir: str | None = None  # None: no logs
     quiet: bool | None = None  # None: as connected
+    open_path_end: bool = True  # end at the end of an open path
 
     def validated(self) -> FollowSettings:
         if self.launch not in LAUNCHES:
@@ -112,6 +113,14 @@ class FlightHooks:
     fence: Any = None
     config_path: str | None = None  # logged with the flight
     log_name: str = "flight"
+    # your own controller instead of a path's: ``follower_factory(estimator)`` (anything with
+    # update(position_enu_m, velocity_enu_m_s) -> Command and reset()), its flight settings from
+    # ``flight_config``; no path, so no envelope
+    follower_factory: Callable[[Any], Any] | None = None
+    flight_config: Any = None
+    on_step: Callable[[Any, Any], None] | None = None  # (step, flight), after logging
+    wait_for_streams: bool = True  # wait for each SET_MESSAGE_INTERVAL's ACK (and repeat each twice)
+    output_warnings: bool = True
 
 
 def load_follow_config(path: Any, speed_m_s: float | None = None) -> Any:
@@ -450,14 +459,17 @@ class Vehicle:
         from pf_offboard.logs.summary import SummaryAccumulator
 
         link, profile, dialect, target = self.link, self.profile, self.dialect, self.target
-        takeoff_only = config is None
+        custom = hooks.follower_factory is not None
+        takeoff_only = config is None and not custom
         if takeoff_only:
             fs = flight_settings_for(None, output="acceleration", end_action="hold")
+        elif custom:
+            fs = flight_settings_for(hooks.flight_config, output=settings.output, end_action=settings.end_action)
         else:
             fs = flight_settings_for(config, output=settings.output, end_action=settings.end_action)
         quiet = self.settings.quiet if settings.quiet is None else settings.quiet
         fence = hooks.fence
-        if not takeoff_only and fence is None and config.path.geodetic is None:
+        if config is not None and fence is None and config.path.geodetic is None:
             fence = envelope_fence(config)  # a path outside the fence: refused before any command
         refusal = dialect.output_refusal(fs.output_mode)
         if refusal:
@@ -478,7 +490,7 @@ class Vehicle:
             link.on_sent = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
         summary_acc = SummaryAccumulator()  # running sums: the steps themselves go to the CSV only
         try:
-            if not takeoff_only and config.path.geodetic is not None:
+            if config is not None and config.path.geodetic is not None:
                 # a path in latitude / longitude: into the vehicle's local frame (its EKF origin), refused
                 # if out of bounds, before any setpoint or command; the log keeps the local way-points
                 from pf_offboard.app.origin import localise_config
@@ -487,8 +499,9 @@ class Vehicle:
                 link.start_reading(self._dispatch)  # (reading the origin used the link's reader)
                 if log is not None:
                     log.write_config(hooks.config_path or config.source, config)
-            if takeoff_only:
-                follower: Any = _NoFollower()
+            estimator = Estimator(settings.state_source, fs.velocity_correction_s)
+            if config is None:
+                follower: Any = hooks.follower_factory(estimator) if hooks.follower_factory is not None else _NoFollower()
                 length, closed, lam_max = 1.0, True, 1.0
                 monitor = None
             else:
@@ -503,7 +516,7 @@ class Vehicle:
             options = FlightOptions(
                 launch=settings.launch,
                 height_m=settings.height_m,
-                end=EndSpec(laps=settings.laps, duration_s=settings.duration_s),
+                end=EndSpec(laps=settings.laps, duration_s=settings.duration_s, open_path_end=settings.open_path_end),
                 end_action=fs.end_action,
                 setpoint_rate_hz=fs.setpoint_rate_hz,
                 state_timeout_s=fs.state_timeout_s,
@@ -516,14 +529,16 @@ class Vehicle:
                 fs.output_mode, profile, target.system, target.component,
                 hover_thrust=fs.hover_thrust if fs.hover_thrust is not None else 0.5,
                 time_constant_s=fs.attitude_time_constant_s,
-                max_body_rate_rad_s=None if takeoff_only else rate_bound(config),
+                max_body_rate_rad_s=None if config is None else rate_bound(config),
             )  # fmt: skip
-            pipeline = Pipeline(follower, encoder, Estimator(settings.state_source, fs.velocity_correction_s))
+            pipeline = Pipeline(follower, encoder, estimator)
 
             def on_step(step: Any) -> None:
                 if log is not None:
                     log.step(step.record)
                 summary_acc.add(step.record)  # not kept: flights can be long
+                if hooks.on_step is not None:
+                    hooks.on_step(step, flight)
 
             flight = Flight(
                 link, profile, pipeline, options, length, closed, lam_max, on_step=on_step, status_stream=self.stream,
@@ -535,14 +550,15 @@ class Vehicle:
 
             async def setup() -> None:
                 requests = stream_requests(settings.state_source, fs.setpoint_rate_hz)
-                await flight.commander.request_intervals(requests)
+                if hooks.wait_for_streams:
+                    await flight.commander.request_intervals(requests)
                 # each request three times: idempotent, and a lossy link must not leave HEARTBEAT at 1 Hz
                 # (the lost-HEARTBEAT watchdog counts on it); twice more, not waited for
-                for _ in range(2):
+                for _ in range(2 if hooks.wait_for_streams else 1):
                     for msg_id, rate, _name in requests:
                         flight.commander.request_interval(msg_id, rate)
                 if not takeoff_only:
-                    await prepare_output(flight, dialect, fs, settings.set_guid_options, self.stream, warnings=True)
+                    await prepare_output(flight, dialect, fs, settings.set_guid_options, self.stream, warnings=hooks.output_warnings)
 
             try:
                 result = await run_flight(flight, setup)

@@ -332,48 +332,21 @@ def excite(args: argparse.Namespace | ExciteRequest, spec: ExcitationSpec, strea
 
 
 async def _excite(request: ExciteRequest, endpoint: Any, config: Any, settings: Any, spec: ExcitationSpec, stream: TextIO) -> ExciteOutcome:
-    """``fly``'s set-up and bridge with the excitation follower (see pf_offboard.app.fly._fly)."""
+    """The excitation as a client of the API (:mod:`pf_offboard.api`): one flight with the
+    excitation follower in place of a path's, handed back in hold; Ctrl-C hands back as fly does."""
     import asyncio
-    import time
+    import signal
 
-    from pymavlink.dialects.v20 import common as mavlink2
+    from pf_offboard.api.vehicle import ConnectSettings, FlightHooks, FollowSettings, Vehicle
+    from pf_offboard.app.fly import default_log_dir
+    from pf_offboard.errors import FlightError
 
-    from pf_offboard.app.dialects import dialect_for
-    from pf_offboard.app.encoders import Encoder
-    from pf_offboard.app.estimator import Estimator
-    from pf_offboard.app.flight import Flight, FlightOptions
-    from pf_offboard.app.fly import default_log_dir, prepare_output, run_flight
-    from pf_offboard.app.link import Link
-    from pf_offboard.app.pipeline import Pipeline
-    from pf_offboard.app.profiles import select_profile
-    from pf_offboard.app.rules import EndSpec
-    from pf_offboard.logs.flightlog import FlightLog
+    followers: list[ExcitationFollower] = []
 
-    link = Link.open(endpoint)
-    log: FlightLog | None = None
-    try:
-        target = await link.wait_heartbeat(request.heartbeat_timeout_s, request.target_system)
-        profile = select_profile(request.autopilot, target.autopilot)
-        dialect = dialect_for(profile)
-        link.set_source_system(target.system)
-        log_dir = Path(request.log_dir) if request.log_dir else default_log_dir()
-        try:
-            log = FlightLog.open(log_dir, name="identify", config_path=request.config_path)
-        except OSError as exc:
-            raise InputError("--log-dir", f"cannot write the logs in {log_dir}: {exc.strerror or exc}") from None
-        flight_log = log
-        link.on_received = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
-        link.on_sent = lambda m: flight_log.frame(m.get_msgbuf(), time.time())
-        encoder = Encoder(
-            settings.output_mode, profile, target.system, target.component,
-            hover_thrust=settings.hover_thrust if settings.hover_thrust is not None else 0.5,
-            time_constant_s=settings.attitude_time_constant_s,
-        )  # fmt: skip
+    def make_follower(estimator: Any) -> ExcitationFollower:
         # as fly: the velocity made consistent with the position. EKF2's velocity is 10-40 cm/s off
         # its position's derivative on PX4 SIH; the soft hold's damping on it alone drifted the
         # real vehicle out of the 1 m box 3 s into the excitation (docs/identify.md)
-        estimator = Estimator("local_position", settings.velocity_correction_s)
-
         def vehicle_time() -> float:
             est = estimator.latest
             return est.time_s if est is not None else 0.0
@@ -382,53 +355,43 @@ async def _excite(request: ExciteRequest, endpoint: Any, config: Any, settings: 
             est = estimator.latest
             return est.q_enu_flu if est is not None else None
 
-        follower = ExcitationFollower(spec, vehicle_time, attitude=attitude)
-        pipeline = Pipeline(follower, encoder, estimator)
-        launch = "takeoff" if request.takeoff_m is not None else "airborne"
-        options = FlightOptions(
-            launch=launch,
-            height_m=request.takeoff_m if request.takeoff_m is not None else math.nan,
-            end=EndSpec(duration_s=spec.total_s, open_path_end=False),
-            end_action="hold",
-            setpoint_rate_hz=settings.setpoint_rate_hz,
-            state_timeout_s=settings.state_timeout_s,
-            status=not request.quiet,
-        )
-        bridge_box: list[Any] = []
+        followers.append(ExcitationFollower(spec, vehicle_time, attitude=attitude))
+        return followers[-1]
 
-        def on_step(step: Any) -> None:
-            flight_log.step(step.record)
-            if follower.abort_reason and bridge_box and step.record.mode == "following":
-                bridge_box[0].request_stop(f"excitation aborted: {follower.abort_reason}")
+    def on_step(step: Any, flight: Any) -> None:
+        follower = followers[-1]
+        if follower.abort_reason and step.record.mode == "following":
+            flight.request_stop(f"excitation aborted: {follower.abort_reason}")
 
-        bridge = Flight(link, profile, pipeline, options, 1.0, True, 1.0, on_step=on_step, status_stream=stream, dialect=dialect)
-        bridge_box.append(bridge)
-        link.start_reading(bridge.on_message)
+    loop = asyncio.get_running_loop()
 
-        async def setup() -> None:
-            for msg_id, rate in (
-                (mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED, settings.setpoint_rate_hz),
-                (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz),
-                (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0),
-            ):
-                bridge.commander.request_interval(msg_id, rate)
-            await prepare_output(bridge, dialect, settings, request.set_guid_options, stream, warnings=False)
+    def started(flight: Any) -> None:
+        loop.add_signal_handler(signal.SIGINT, flight.request_stop)  # Ctrl-C: hand back, as fly does
 
-        import signal
+    def ended(flight: Any) -> None:
+        loop.remove_signal_handler(signal.SIGINT)
 
-        loop = asyncio.get_running_loop()
-        loop.add_signal_handler(signal.SIGINT, bridge.request_stop)  # Ctrl-C: hand back, as fly does
+    connect = ConnectSettings(endpoint, request.autopilot, request.target_system, request.heartbeat_timeout_s, None, request.quiet)
+    follow = FollowSettings(
+        launch="takeoff" if request.takeoff_m is not None else "airborne",
+        height_m=request.takeoff_m if request.takeoff_m is not None else math.nan,
+        duration_s=spec.total_s, open_path_end=False, output=settings.output_mode, end_action="hold",
+        set_guid_options=request.set_guid_options, log_dir=request.log_dir or str(default_log_dir()),
+    )  # fmt: skip
+    hooks = FlightHooks(
+        on_start=started, on_end=ended, config_path=request.config_path, log_name="identify", follower_factory=make_follower,
+        flight_config=config, on_step=on_step, wait_for_streams=False, output_warnings=False,
+    )  # fmt: skip
+    async with Vehicle(connect, stream) as vehicle:
         try:
-            result = await run_flight(bridge, setup)
-        finally:
-            loop.remove_signal_handler(signal.SIGINT)
-    finally:
-        link.close()
-        if log is not None:
-            log.close()
-    assert log is not None
+            result = await vehicle._run(None, follow, hooks)
+        except FlightError as exc:
+            if exc.result is None:
+                raise
+            result = exc.result
     print(f"pf-offboard identify: excitation flight: {result.reason} (exit {result.exit_code})", file=stream)
-    return ExciteOutcome(result.exit_code, result.reason, log.paths.tlog.parent, log.paths.tlog, follower.abort_reason)
+    tlog = result.log_dir / "identify.tlog" if result.log_dir is not None else None
+    return ExciteOutcome(result.exit_code, result.reason, result.log_dir, tlog, followers[-1].abort_reason if followers else "")
 
 
 # ---------------------------------------------------------------------------------- in process (sim)
