@@ -30,22 +30,30 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser; only ``command``'s module is imported (None: every command's, e.g. for docs),
+    so ``pf-offboard --help`` / ``--version`` import nothing heavy (measured in ``bench``)."""
+    from pf_offboard import __version__
+
     parser = argparse.ArgumentParser(
         prog="pf-offboard",
         description="Time-invariant quadrotor path following (Kumar & Gill) over MAVLink.",
     )
+    parser.add_argument("--version", action="version", version=f"pf-offboard {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, module_name, help_text in COMMANDS:
-        module = importlib.import_module(module_name)
         p = sub.add_parser(name, help=help_text, description=help_text)
-        module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+        if command is None or name == command:
+            module = importlib.import_module(module_name)
+            module.add_arguments(p)
+            p.set_defaults(_run=module.run)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    first = next((a for a in argv if not a.startswith("-")), "")
+    parser = build_parser(first if first in {name for name, _, _ in COMMANDS} else "")
     args = parser.parse_args(argv)
     try:
         return int(args._run(args))

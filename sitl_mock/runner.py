@@ -132,7 +132,7 @@ class SpawnedMock:
 
 def spawn(config: MockConfig, extra_args: list[str] | None = None) -> SpawnedMock:
     """Start the mock in a subprocess and wait until it has bound its ports."""
-    from sitl_mock.cli import config_to_args
+    from sitl_mock.argv import config_to_args
 
     config.validate()
     cmd = [sys.executable, "-m", "sitl_mock", *config_to_args(config), "--print-ports", *(extra_args or [])]

@@ -453,7 +453,8 @@ class Vehicle:
         from pf_offboard.app.encoders import Encoder
         from pf_offboard.app.estimator import Estimator
         from pf_offboard.app.flight import Flight, FlightOptions
-        from pf_offboard.app.fly import envelope_fence, flight_settings_for, prepare_output, rate_bound, run_flight, stream_requests
+        from pf_offboard.app.running import prepare_output, run_flight, stream_requests
+        from pf_offboard.app.settings import envelope_fence, flight_settings_for, rate_bound
         from pf_offboard.app.pipeline import Pipeline
         from pf_offboard.app.rules import EndSpec
         from pf_offboard.logs.summary import SummaryAccumulator

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import datetime as _dt
 import functools
 import gc
 import math
@@ -17,9 +16,15 @@ import signal
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from typing import Any, TextIO
 
+from pf_offboard.app.settings import (  # noqa: F401  (re-exported: the API and tests use them from here too)
+    FlightSettings,
+    default_log_dir,
+    envelope_fence,
+    flight_settings_for,
+)
 from pf_offboard.errors import InputError, LinkError
 
 LAUNCHES = ("takeoff", "airborne", "throw")
@@ -67,65 +72,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the flight report (as in LOG_DIR/summary.json) as JSON on stdout")
 
 
-@dataclass(frozen=True)
-class FlightSettings:
-    """The ``flight:`` section of a config with the command-line overrides applied."""
-
-    output_mode: str
-    setpoint_rate_hz: float
-    state_timeout_s: float
-    hover_thrust: float | None
-    end_action: str
-    attitude_time_constant_s: float
-    velocity_correction_s: float | None  # pf_offboard.app.estimator; None: off
-
-
 def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
     """Read ``config.flight`` (tolerating a config without one) and apply the flags; validate."""
     return flight_settings_for(config, output=args.output, end_action=args.end_action)
-
-
-def flight_settings_for(config: Any, output: str | None = None, end_action: str | None = None) -> FlightSettings:
-    """``config.flight`` with an output mode / end action given by the user (None: the config's)."""
-    flight = getattr(config, "flight", None)
-
-    def get(name: str, default: Any) -> Any:
-        value = getattr(flight, name, None) if flight is not None else None
-        return default if value is None else value
-
-    s = FlightSettings(
-        output_mode=output or get("output_mode", "acceleration"),
-        setpoint_rate_hz=float(get("setpoint_rate_hz", 50.0)),
-        state_timeout_s=float(get("state_timeout_s", 0.5)),
-        hover_thrust=get("hover_thrust", None),
-        end_action=end_action or get("end_action", "hold"),
-        attitude_time_constant_s=_attitude_time_constant(config, get("attitude_time_constant_s", None)),
-        velocity_correction_s=get("velocity_correction_s", None),
-    )
-    if s.output_mode not in ("acceleration", "attitude", "rates"):
-        raise InputError("flight.output_mode", f"must be acceleration, attitude or rates, got {s.output_mode!r}")
-    if not (math.isfinite(s.setpoint_rate_hz) and 2.0 < s.setpoint_rate_hz <= 1000.0):
-        raise InputError("flight.setpoint_rate_hz", f"must be in (2, 1000] Hz (PX4 needs > 2 Hz), got {s.setpoint_rate_hz}")
-    if not (math.isfinite(s.state_timeout_s) and 0.0 < s.state_timeout_s <= 5.0):
-        raise InputError("flight.state_timeout_s", f"must be in (0, 5] s, got {s.state_timeout_s}")
-    if s.hover_thrust is not None and not (0.05 <= float(s.hover_thrust) <= 0.95):
-        raise InputError("flight.hover_thrust", f"must be in [0.05, 0.95] (normalised) or omitted, got {s.hover_thrust}")
-    if s.end_action not in ("hold", "land"):
-        raise InputError("flight.end_action", f"must be hold or land, got {s.end_action!r}")
-    if not (math.isfinite(s.attitude_time_constant_s) and 0.01 <= s.attitude_time_constant_s <= 2.0):
-        raise InputError("flight.attitude_time_constant_s", f"must be in [0.01, 2] s, got {s.attitude_time_constant_s}")
-    return s
-
-
-def _attitude_time_constant(config: Any, configured: Any) -> float:
-    """Rates mode's τ (s): ``flight.attitude_time_constant_s`` if set, else derived from the
-    identified rate loop (``vehicle.rate_time_constant_s``: 4x it), else the default 0.25 s."""
-    from pf_offboard.control.attitude import AttitudeRateLaw
-
-    if configured is not None:
-        return float(configured)
-    rate_tc = getattr(getattr(config, "vehicle", None), "rate_time_constant_s", 0.0) or 0.0
-    return AttitudeRateLaw.for_rate_loop(float(rate_tc)).time_constant_s
 
 
 def _heights_from_config(args: argparse.Namespace, config: Any) -> None:
@@ -156,35 +105,6 @@ def _check_args(args: argparse.Namespace) -> None:
             raise InputError(flag, f"must be in (0, 3600] s, got {value}")
     if args.target_system is not None and not 1 <= args.target_system <= 255:
         raise InputError("--target-system", f"must be a MAVLink system id in 1..255, got {args.target_system}")
-
-
-def envelope_fence(config: Any) -> Any:
-    """The safety fence for this config's path (pf_offboard.safety); InputError (exit 2) if the
-    path itself leaves it or dips below the floor: such a flight is refused before any traffic."""
-    from pf_offboard.safety import SafetyConfig, check_path, fence_for_path
-
-    safety = getattr(config, "safety", None) or SafetyConfig()
-    p = config.path
-    path = p.spline()
-    n = max(2, math.ceil(path.lam_max / 0.05) + 1)  # every 5 cm or finer
-    points = [path.eval_floats(path.lam_max * i / (n - 1))[:3] for i in range(n)]
-    fence = fence_for_path(safety, points)
-    if safety.enabled:
-        why = check_path(fence, points)
-        if why:
-            raise InputError("safety", why)
-    return fence
-
-
-def rate_bound(config: Any) -> float | None:
-    """safety.max_body_rate_rad_s when the envelope is on (the encoder bounds rates-mode setpoints)."""
-    safety = getattr(config, "safety", None)
-    return safety.max_body_rate_rad_s if safety is not None and safety.enabled else None
-
-
-def default_log_dir() -> Path:
-    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
-    return Path("flights") / stamp
 
 
 @dataclass
@@ -321,23 +241,6 @@ def fly_request(
         return FlyOutcome(3, str(exc), None, None, None)
 
 
-def stream_requests(state_source: str, setpoint_rate_hz: float) -> list[tuple[int, float, str]]:
-    """The telemetry a flight needs, as (message id, rate Hz, name): the state at the setpoint rate
-    (a fresh sample drives each setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s
-    where honoured."""
-    from pymavlink.dialects.v20 import common as mavlink2
-
-    if state_source == "local_position":
-        state = (mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED, setpoint_rate_hz, "LOCAL_POSITION_NED")
-    else:
-        state = (mavlink2.MAVLINK_MSG_ID_ODOMETRY, setpoint_rate_hz, "ODOMETRY")
-    return [
-        state,
-        (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, setpoint_rate_hz, "ATTITUDE_QUATERNION"),
-        (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0, "HEARTBEAT"),
-    ]
-
-
 async def _fly(
     request: FlyRequest, endpoint: Any, config: Any, settings: FlightSettings, stream: TextIO, fence: Any = None,
     signing_key: bytes | None = None, on_start: Callable[[Any], None] | None = None,
@@ -389,39 +292,6 @@ async def _fly(
     )  # fmt: skip
 
 
-async def run_flight(flight: Any, setup: Callable[[], Awaitable[None]] | None = None) -> Any:
-    """One TaskGroup: the flight, the keep-alive / watchdogs, our HEARTBEAT and the status line.
-    Bad input (InputError -> exit 2, e.g. GUID_OPTIONS refused in setup) and link failures
-    (LinkError -> exit 3) raised in a task come out as themselves, not as an exception group."""
-    try:
-        async with asyncio.TaskGroup() as tg:
-            task = tg.create_task(flight.fly(setup))
-            helpers = [tg.create_task(flight.keepalive()), tg.create_task(flight.heartbeat()), tg.create_task(flight.status_line())]
-            result = await task
-            for helper in helpers:  # they poll the phase once a period (HEARTBEAT: 1 s): end them now
-                helper.cancel()
-    except BaseExceptionGroup as group:
-        first = _first_leaf(group)
-        if isinstance(first, (InputError, LinkError)):
-            raise first from None
-        raise
-    return result
-
-
-async def prepare_output(flight: Any, dialect: Any, settings: FlightSettings, allow_set_guid_options: bool, stream: TextIO,
-                         warnings: bool = True) -> None:  # fmt: skip
-    """The dialect reads what the output mode needs (hover thrust, tilt mapping, GUID_OPTIONS) and
-    sets it on the encoder; ``warnings``: also what it warns about (ArduPilot's jerk limits)."""
-    pipeline = flight.pipeline
-    pipeline.encoder = await dialect.read_setpoint_mapping(
-        flight.params, settings.output_mode, settings.hover_thrust, pipeline.encoder, lambda line: print(line, file=stream)
-    )
-    await dialect.ensure_output_requirements(flight.params, settings.output_mode, allow_set_guid_options)
-    if warnings:
-        for line in await dialect.output_warnings(flight.params, settings.output_mode):
-            print(f"pf-offboard fly: warning: {line}", file=stream)
-
-
 def _write_summary_json(as_json: bool, code: int, reason: str, summary: Any, log_dir: Path, config: Any) -> None:
     """``LOG_DIR/summary.json`` always; with ``--json`` the same report on stdout."""
     from pf_offboard.logs.summary import flight_report, report_json, write_report
@@ -430,13 +300,6 @@ def _write_summary_json(as_json: bool, code: int, reason: str, summary: Any, log
     write_report(report, log_dir)
     if as_json:
         print(report_json(report))
-
-
-def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[type-arg]
-    first: BaseException = group
-    while isinstance(first, BaseExceptionGroup):
-        first = first.exceptions[0]
-    return first
 
 
 def _report(stream: TextIO, reason: str, code: int, summary: Any, log_dir: Path, flight: Any) -> None:

@@ -1,6 +1,8 @@
 """``pf-offboard bench``: speed figures (printed, or ``--json``), never timing assertions in tests.
 
 Sections:
+- ``startup``: wall time of ``pf-offboard --help`` / ``--version`` in a fresh interpreter (median)
+  and which heavy modules (numpy, scipy, pymavlink, ...) they imported (none expected).
 - ``core``: cost of ``PathFollower.update()`` on the paper path (median, p99 µs).
 - ``sim``: in-process simulation speed of the sitl_mock dynamics (× real time at 1 kHz physics).
 - ``mavlink``: lockstep simulation speed over loopback MAVLink with a client in the loop (× real
@@ -21,6 +23,7 @@ from typing import Any
 
 # section -> (module, function) returning a flat dict of figures; imported only when run.
 SECTIONS: tuple[tuple[str, str, str], ...] = (
+    ("startup", "pf_offboard.bench.startup", "run"),
     ("core", "pf_offboard.bench.core", "run"),
     ("sim", "sitl_mock.dynamics.bench", "run_inprocess"),
     ("mavlink", "sitl_mock.bench_lockstep", "run_lockstep"),

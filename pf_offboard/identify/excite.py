@@ -309,7 +309,7 @@ def excite(args: argparse.Namespace | ExciteRequest, spec: ExcitationSpec, strea
     """Connect, fly the excitation (``--airborne`` or ``--takeoff``), hand back; never hangs."""
     import asyncio
 
-    from pf_offboard.app.fly import flight_settings_for
+    from pf_offboard.app.settings import flight_settings_for
     from pf_offboard.app.link import parse_endpoint
     from pf_offboard.config import load_config
     from pf_offboard.errors import LinkError
@@ -338,7 +338,7 @@ async def _excite(request: ExciteRequest, endpoint: Any, config: Any, settings: 
     import signal
 
     from pf_offboard.api.vehicle import ConnectSettings, FlightHooks, FollowSettings, Vehicle
-    from pf_offboard.app.fly import default_log_dir
+    from pf_offboard.app.settings import default_log_dir
     from pf_offboard.errors import FlightError
 
     followers: list[ExcitationFollower] = []

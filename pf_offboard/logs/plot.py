@@ -347,7 +347,7 @@ def make_figures(
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("logs", nargs="+", metavar="LOG", help="step-log CSVs or .tlog files (with their sibling .csv)")
     parser.add_argument("--out", required=True, help="directory for the PNGs")
-    parser.add_argument("--config", help="config YAML for the reference path (default: the .yaml beside the first log)")
+    parser.add_argument("--config", help="config YAML (or a shipped config's name) for the reference path (default: the .yaml beside the first log)")
     parser.add_argument("--title", help="title of the 3-D path figure")
 
 
@@ -358,6 +358,10 @@ def run(args: argparse.Namespace) -> int:
         if Path(p).is_dir():
             raise InputError("LOG", f"{p} is a directory; give its .csv or .tlog (e.g. {Path(p) / 'flight.csv'})")
     make_dir(args.out, "--out")
+    if args.config:
+        from pf_offboard.shipped import resolve_config
+
+        args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     for png in make_figures(args.logs, args.out, args.config, args.title):
         print(png)
     return 0

@@ -246,7 +246,7 @@ def build_pipeline(
     """A fresh pipeline configured like the flight's: (pipeline, profile, output_mode, target sysid)."""
     from pf_offboard.app.encoders import Encoder
     from pf_offboard.app.estimator import Estimator
-    from pf_offboard.app.fly import flight_settings
+    from pf_offboard.app.settings import flight_settings_for
     from pf_offboard.app.pipeline import Pipeline
     from pf_offboard.app.profiles import select_profile
     from pf_offboard.control import controller_from_config
@@ -262,7 +262,7 @@ def build_pipeline(
             heartbeat_autopilot = int(m.autopilot)
             break
     profile = select_profile(options.autopilot, heartbeat_autopilot)
-    settings = flight_settings(config, argparse.Namespace(output=options.output_mode, end_action=None))
+    settings = flight_settings_for(config, output=options.output_mode)
     output_mode = options.output_mode or settings.output_mode
     flown_mode = _output_mode_of(first)
     if options.output_mode is None and flown_mode != output_mode:

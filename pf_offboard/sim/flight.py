@@ -20,7 +20,6 @@ throw trigger for a thrown start), follow until the duration or lap count is rea
 
 from __future__ import annotations
 
-import argparse
 import functools
 import math
 import time
@@ -315,7 +314,7 @@ class SimFlight:
         from pf_offboard.app.rules import EndSpec, LapCounter, ThrowTrigger
         from pf_offboard.app.encoders import Encoder
         from pf_offboard.app.estimator import Estimator
-        from pf_offboard.app.fly import flight_settings
+        from pf_offboard.app.settings import flight_settings_for
         from pf_offboard.app.pipeline import Pipeline
         from pf_offboard.app.profiles import PROFILES
         from pf_offboard.config import load_config
@@ -327,7 +326,7 @@ class SimFlight:
         config = load_config(self.config_path)
         config.require_local("sim has no vehicle to read the origin from")
         self.config = config
-        settings = flight_settings(config, argparse.Namespace(output=spec.output_mode, end_action=None))
+        settings = flight_settings_for(config, output=spec.output_mode)
         self.settings = settings
         rate = spec.rate_hz if spec.rate_hz is not None else min(settings.setpoint_rate_hz, MAX_RATE_HZ)
         if not 20.0 <= rate <= MAX_RATE_HZ:
