@@ -56,10 +56,21 @@ class FollowResult:
 
     @property
     def cross_track_rms_m(self) -> float | None:
-        """RMS distance to the path once converged (m); None without a summary."""
+        """RMS distance to the path once converged (within 5 cm and 0.1 m/s of the reference from
+        then on), over the rest of the following (m); None if it never converged."""
         return None if self.summary is None else self.summary.cross_track_rms_m
 
     @property
+    def whole_cross_track_rms_m(self) -> float | None:
+        """RMS distance to the path over the whole following, convergence included (m)."""
+        return None if self.summary is None else self.summary.whole_cross_track_rms_m
+
+    @property
+    def whole_speed_error_rms_m_s(self) -> float | None:
+        """RMS speed error over the whole following, convergence included (m/s)."""
+        return None if self.summary is None else self.summary.whole_speed_error_rms_m_s
+
+    @property
     def speed_error_rms_m_s(self) -> float | None:
-        """RMS error of the speed along the path once converged (m/s); None without a summary."""
+        """RMS error of the speed along the path once converged (m/s); None if it never converged."""
         return None if self.summary is None else self.summary.speed_error_rms_m_s

@@ -123,11 +123,12 @@ class FlightHooks:
     output_warnings: bool = True
 
 
-def load_follow_config(path: Any, speed_m_s: float | None = None) -> Any:
+def load_follow_config(path: Any, speed_m_s: float | None = None, altitude_reference: str | None = None) -> Any:
     """A :class:`pf_offboard.Config` from what :meth:`Vehicle.follow` accepts: a Config, a
     :class:`pf_offboard.Path` (with ``speed_m_s``), a config file / shipped config name, or a
     way-point file from a planning tool (QGC ``.plan``, ``.waypoints``, ``.csv``, ``.geojson``,
-    ``.kml``). ``speed_m_s`` overrides the config's speed (its sign picks the direction)."""
+    ``.kml``; its altitudes as the file says, else ``altitude_reference``: relative_home | amsl).
+    ``speed_m_s`` overrides the config's speed (its sign picks the direction)."""
     from pf_offboard.config import Config, load_config, parse_config
 
     if isinstance(path, Config):
@@ -144,7 +145,13 @@ def load_follow_config(path: Any, speed_m_s: float | None = None) -> Any:
             file = FilePath(text)
             if not file.is_file():
                 raise InputError("path", f"no such file: {text}")
-            data: dict[str, Any] = {"path": {"file": str(file.resolve())}}
+            from pf_offboard.geopath import read_geopath
+
+            reference = altitude_reference or read_geopath(str(file)).altitude_reference
+            if reference is None:
+                raise InputError("altitude_reference", f"{text} does not say what its altitudes are relative to: "
+                                 "pass altitude_reference='relative_home' (above home) or 'amsl'")  # fmt: skip
+            data: dict[str, Any] = {"path": {"file": str(file.resolve()), "altitude_reference": reference}}
             if speed_m_s is not None:
                 data["speed_m_s"] = float(speed_m_s)
             return parse_config(data, str(file))
@@ -295,6 +302,7 @@ class Vehicle:
         path: Any,
         *,
         speed: float | None = None,
+        altitude_reference: str | None = None,
         laps: float | None = None,
         duration_s: float | None = None,
         output: str | None = None,
@@ -316,7 +324,7 @@ class Vehicle:
         ``height_m``). ``output``: acceleration | attitude | rates (default the config's).
         ``log_dir``: write the flight's logs there (default: none). Raises a
         :class:`pf_offboard.FlightError` subclass when it ends any other way."""
-        config = load_follow_config(path, speed)
+        config = load_follow_config(path, speed, altitude_reference)
         config_path = os.fspath(path) if isinstance(path, (str, os.PathLike)) else None
         if height_m is None:
             flight = config.flight

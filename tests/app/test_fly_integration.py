@@ -130,9 +130,10 @@ def test_takeover_stops_setpoints_at_once_and_never_reengages(tmp_path) -> None:
 def test_bad_endpoint_is_exit_2(capsys) -> None:
     from pf_offboard.cli import main
 
-    assert main(["fly", "--connect", "udp:127.0.0.1:14540", "--config", "configs/paper.yaml", "--airborne"]) == 2
+    assert main(["fly", "--connect", "udq:127.0.0.1:14540", "--config", "configs/paper.yaml", "--airborne"]) == 2
     err = capsys.readouterr().err
-    assert "--connect" in err and "unknown endpoint kind 'udp'" in err
+    # one line naming the flag and the forms that work
+    assert "--connect" in err and "unknown endpoint kind 'udq'" in err and "udp://:14540" in err and len(err.strip().splitlines()) == 1
 
 
 def test_no_heartbeat_times_out(tmp_path, capsys) -> None:
