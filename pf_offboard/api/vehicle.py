@@ -325,7 +325,11 @@ class Vehicle:
         ``log_dir``: write the flight's logs there (default: none). Raises a
         :class:`pf_offboard.FlightError` subclass when it ends any other way."""
         config = load_follow_config(path, speed, altitude_reference)
-        config_path = os.fspath(path) if isinstance(path, (str, os.PathLike)) else None
+        config_path = None  # the YAML copied beside the logs (a config file or shipped config)
+        if isinstance(path, (str, os.PathLike)) and not os.fspath(path).lower().endswith(PATH_FILE_SUFFIXES):
+            from pf_offboard.shipped import resolve_config
+
+            config_path = str(resolve_config(os.fspath(path), "path"))
         if height_m is None:
             flight = config.flight
             height_m = flight.takeoff_altitude_m if launch == "takeoff" else (flight.throw_activation_height_m if launch == "throw" else None)
@@ -488,8 +492,10 @@ class Vehicle:
         link.max_state_age_s = fs.state_timeout_s
         log = None
         if settings.log_dir is not None:
+            from pf_offboard.logs._io import make_dir
             from pf_offboard.logs.flightlog import FlightLog
 
+            make_dir(settings.log_dir, "--log-dir")  # created (or InputError) before anything is sent
             try:
                 log = FlightLog.open(FilePath(settings.log_dir), name=hooks.log_name, config_path=hooks.config_path)
             except OSError as exc:
@@ -506,8 +512,8 @@ class Vehicle:
 
                 config = await localise_config(link, config, self.stream)
                 link.start_reading(self._dispatch)  # (reading the origin used the link's reader)
-                if log is not None:
-                    log.write_config(hooks.config_path or config.source, config)
+                if log is not None and hooks.config_path is not None:
+                    log.write_config(hooks.config_path, config)
             estimator = Estimator(settings.state_source, fs.velocity_correction_s)
             if config is None:
                 follower: Any = hooks.follower_factory(estimator) if hooks.follower_factory is not None else _NoFollower()
