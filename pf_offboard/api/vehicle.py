@@ -484,7 +484,7 @@ class Vehicle:
         fence = hooks.fence
         if config is not None and fence is None and config.path.geodetic is None:
             fence = envelope_fence(config)  # a path outside the fence: refused before any command
-        refusal = dialect.output_refusal(fs.output_mode)
+        refusal = "" if takeoff_only else dialect.output_refusal(fs.output_mode)  # (a take-off sends no path setpoints)
         if refusal:
             if not settings.experimental_output:
                 raise InputError("--output", f"{fs.output_mode} refused on {profile.name}: {refusal}")

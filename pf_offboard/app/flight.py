@@ -227,6 +227,10 @@ class Flight:
             await self._takeoff(est, ready_deadline)
             if not opts.follow:
                 self._end_reason = f"take-off to {opts.height_m:g} m held"
+                if self.dialect.holds_in_offboard_after_takeoff:
+                    self._last_setpoint = None
+                    self._finish(EXIT_OK, f"{self._end_reason}; holding in {self.profile.offboard.name}")
+                    return
                 self.phase = Phase.HANDING_BACK
                 return
             self._stream_follow_before_active = True
@@ -442,6 +446,8 @@ class Flight:
             return
         if phase is Phase.HANDING_BACK:
             self.pipeline.mark_consumed()
+            if not self.options.follow and not self.dialect.takeoff_streams_setpoints:
+                return  # a take-off only (ArduPilot: GUIDED holds by itself): nothing but the mode request
             # keep the stream (and a lockstep clock) going with the hold until the mode changes
             self._send(self.pipeline.encoder.hold(est, time_boot_ms(est)).message)
             return

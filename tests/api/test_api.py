@@ -225,3 +225,25 @@ def test_bad_input_is_a_typed_error_before_any_traffic(tmp_path) -> None:
     with pytest.raises(pf_offboard.InputError) as info:
         asyncio.run(bad_url())
     assert info.value.field == "--connect"
+
+
+def test_ardupilot_take_off_holds_in_guided_then_follows(tmp_path) -> None:
+    """ArduPilot: take off (GUIDED, NAV_TAKEOFF) and stay in GUIDED, which holds the position by
+    itself (its LOITER would follow the low RC throttle down); the next follow engages from there.
+    The mock on its own clock (4x): ArduPilot climbs while we send nothing, which lockstep cannot."""
+    config = write_config(tmp_path, rate_hz=50.0, output_mode="attitude")
+    cfg = MockConfig(vehicle="fast", profile="ardupilot", spawn=SpawnSpec.parse("ground:-1.5,0"), udp_local_port=0,
+                     udp_remote=None, speed=4.0)  # fmt: skip
+
+    async def fly(url: str) -> tuple[pf_offboard.FollowResult, str, pf_offboard.FollowResult]:
+        async with pf_offboard.connect(url, quiet=True, status_stream=io.StringIO()) as vehicle:
+            took = await vehicle.takeoff(2.0)
+            mode_after_takeoff = vehicle.progress().mode
+            result = await vehicle.follow(config, duration_s=2.0, set_guid_options=True)
+            return took, mode_after_takeoff, result
+
+    with run_in_thread(cfg) as mock:
+        took, mode, result = asyncio.run(fly(_url(mock)))
+        assert _mode(mock) == "LOITER"
+    assert took.ok and "holding in GUIDED" in took.reason and mode == "GUIDED"
+    assert result.ok and "duration 2 s reached; handed back in LOITER" in result.reason

@@ -16,6 +16,9 @@ class ArduPilotDialect(Dialect):
     profile = ARDUPILOT
     # GUIDED take-off: any setpoint would cancel it (the mode request alone holds it when safing)
     takeoff_streams_setpoints = False
+    # GUIDED holds the take-off position by itself; LOITER would follow the RC throttle (with the
+    # stick low, as in SITL without RC, it descends)
+    holds_in_offboard_after_takeoff = True
 
     async def take_off(self, ops: TakeoffOps, height_m: float) -> None:
         """GUIDED, arm, MAV_CMD_NAV_TAKEOFF (ArduPilot ignores position targets on the ground).

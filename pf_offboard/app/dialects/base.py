@@ -42,6 +42,9 @@ class Dialect:
     profile: Profile
     # while taking off, a position hold may be streamed (and is the safe setpoint when safing)
     takeoff_streams_setpoints: bool = True
+    # after a take-off alone (the API's takeoff()), the autopilot holds the vehicle in our mode
+    # without a setpoint stream; False: it is handed to the hold mode instead
+    holds_in_offboard_after_takeoff: bool = False
 
     @property
     def name(self) -> str:
