@@ -20,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from pf_offboard.app.signing import verify_signature_first
 from pf_offboard.errors import InputError, LinkError
 
 # MAVLink 2 framing (ODOMETRY and others have ids > 255): must be chosen before mavutil is imported.
@@ -226,6 +227,8 @@ class Link:
                 raise LinkError(f"signing key must be 32 bytes, got {len(signing_key)}")
             # allow_unsigned_callback None: an unsigned frame is refused like a wrongly signed one
             conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=None)
+            # the signature before the timestamp: one wrongly signed frame must not stall the stream
+            verify_signature_first(conn.mav)
         return cls(endpoint, conn, signing=signing_key is not None)
 
     # ------------------------------------------------------------------ receiving
