@@ -177,9 +177,21 @@ def _rate_bound(config: Any) -> float | None:
     return safety.max_body_rate_rad_s if safety is not None and safety.enabled else None
 
 
-def default_log_dir() -> Path:
+def default_log_dir(prefix: str = "") -> Path:
+    """``flights/<prefix><UTC time>``, created here and never shared: a run started in the same
+    second as another (or a directory left from one) gets ``-2``, ``-3`` ... (the directory is made
+    with an exclusive mkdir, so two concurrent runs can never write the same one)."""
     stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
-    return Path("flights") / stamp
+    base = Path("flights")
+    base.mkdir(parents=True, exist_ok=True)
+    for n in range(1, 10_000):
+        candidate = base / (f"{prefix}{stamp}" + (f"-{n}" if n > 1 else ""))
+        try:
+            candidate.mkdir()
+        except FileExistsError:
+            continue
+        return candidate
+    raise OSError(f"no free log directory name under {base} for {prefix}{stamp}")
 
 
 @dataclass
@@ -301,9 +313,10 @@ async def _fly(
                 raise InputError("--output", f"{settings.output_mode} refused on {profile.name}: {refusal}")
             print(f"pf-offboard fly: warning: {settings.output_mode} on {profile.name} is experimental: {refusal}", file=stream)
         link.set_source_system(target.system)
-        log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
+        log_dir = Path(args.log_dir) if args.log_dir else Path("flights")
         try:
-            log = FlightLog.open(log_dir, config_path=args.config)
+            log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
+            log = FlightLog.open(log_dir, config_path=args.config, warn=lambda text: print(f"pf-offboard fly: warning: {text}", file=stream, flush=True))
         except OSError as exc:
             raise InputError("--log-dir", f"cannot write the logs in {log_dir}: {exc.strerror or exc}") from None
         flight_log = log
@@ -420,7 +433,10 @@ def _write_summary_json(args: argparse.Namespace, code: int, reason: str, summar
     from pf_offboard.logs.summary import flight_report, report_json, write_report
 
     report = flight_report(summary, code, reason, log_dir, config)
-    write_report(report, log_dir)
+    try:
+        write_report(report, log_dir)
+    except OSError as exc:  # a full disk: the flight's outcome is still reported on the terminal
+        print(f"pf-offboard fly: warning: cannot write {log_dir}/summary.json: {exc.strerror or exc}", file=sys.stderr)
     if getattr(args, "json", False):
         print(report_json(report))
 

@@ -333,8 +333,9 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
         target = await link.wait_heartbeat(args.heartbeat_timeout, args.target_system)
         profile = select_profile(args.autopilot, target.autopilot)
         link.set_source_system(target.system)
-        log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
+        log_dir = Path(args.log_dir) if args.log_dir else Path("flights")
         try:
+            log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
             log = FlightLog.open(log_dir, name="identify", config_path=args.config)
         except OSError as exc:
             raise InputError("--log-dir", f"cannot write the logs in {log_dir}: {exc.strerror or exc}") from None
