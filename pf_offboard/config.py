@@ -543,6 +543,8 @@ def _safety(data: Any) -> SafetyConfig:
         max_attitude_error_deg=num("max_attitude_error_deg", 0.0, 180.0, lo_open=True),
         attitude_error_time_s=num("attitude_error_time_s", 0.0, 60.0),
         max_descent_speed_m_s=num("max_descent_speed_m_s", 0.0, 100.0, lo_open=True),
+        falling_confirm_s=num("falling_confirm_s", 0.0, 5.0),
+        max_estimator_reset_m=num("max_estimator_reset_m", 0.0, 1e4, lo_open=True),
         no_progress_s=num("no_progress_s", 0.0, 3600.0, lo_open=True),
         min_progress_m=num("min_progress_m", 0.0, 1e4, lo_open=True),
         safe_mode_timeout_s=num("safe_mode_timeout_s", 0.0, 600.0, lo_open=True),
