@@ -134,6 +134,7 @@ class LinkCounters:
     bad_signature: int = 0  # unsigned or wrongly signed frames (signing on)
     bad_data: int = 0  # CRC / framing errors
     stale_state: int = 0  # state samples that waited in the socket longer than the state timeout
+    foreign_ack: int = 0  # COMMAND_ACKs addressed to another system / component (another GCS's command)
     reader_yields: int = 0  # wake-ups that stopped at MAX_MESSAGES_PER_WAKEUP with more waiting
 
     @property
@@ -145,7 +146,8 @@ class LinkCounters:
         return (
             f"rejected {self.foreign_peer} from another address, {self.not_target} from another component, "
             f"{self.not_autopilot_heartbeat} non-autopilot HEARTBEATs, {self.bad_signature} badly signed; "
-            f"{self.bad_data} corrupt, {self.stale_state} stale state dropped, {self.reader_yields} reader yields"
+            f"{self.bad_data} corrupt, {self.stale_state} stale state dropped, {self.foreign_ack} ACKs for others ignored, "
+            f"{self.reader_yields} reader yields"
         )
 
 
@@ -327,9 +329,20 @@ class Link:
                 return
         if self.on_received is not None:
             self.on_received(msg)
+        if kind == "COMMAND_ACK" and not self.ack_is_ours(msg):
+            self._n["foreign_ack"] += 1  # logged, never handed on: another GCS's command was answered
+            return
         self._last_addr = addr
         if self._handler is not None:
             self._handler(msg)
+
+    def ack_is_ours(self, msg: Any) -> bool:
+        """A COMMAND_ACK answers *our* command: its target system / component are ours (0: not
+        filled in, as MAVLink 1 and old autopilots send it). PX4 and ArduPilot address each ACK to
+        the command's sender and send it on every link: one meant for another GCS must not count."""
+        system = int(getattr(msg, "target_system", 0) or 0)
+        component = int(getattr(msg, "target_component", 0) or 0)
+        return system in (0, int(self._conn.mav.srcSystem)) and component in (0, MAV_COMP_ID_ONBOARD_COMPUTER)
 
     def _from_configured_address(self, addr: Any) -> bool:
         """``udpout`` names the autopilot's address: only it may identify as the autopilot. (``udpin``
