@@ -681,13 +681,19 @@ class _StrictLoader:
 
 def load_config(path: str | os.PathLike[str]) -> Config:
     """Read and validate a YAML config file."""
+    from pf_offboard.inputfile import read_bounded
+
     source = os.fspath(path)
     try:
-        with open(source, "rb") as fh:
-            data = fh.read(MAX_CONFIG_BYTES + 1)
-    except OSError as exc:
-        raise ConfigError(source, f"cannot read config file: {exc.strerror or exc}") from None
+        data = read_bounded(source, MAX_CONFIG_BYTES)
+    except ValueError as exc:
+        raise ConfigError(_short(source), f"config file: {exc}") from None
     return parse_config_bytes(data, source)
+
+
+def _short(name: str, limit: int = 200) -> str:
+    """A file name for a one-line message (a 5000-character name is cut in the middle)."""
+    return name if len(name) <= limit else f"{name[: limit // 2]}...{name[-limit // 2 :]} ({len(name)} characters)"
 
 
 def parse_config_bytes(data: bytes, source: str = "<config>") -> Config:

@@ -136,19 +136,24 @@ def _heights_from_config(args: argparse.Namespace, config: Any) -> None:
             raise InputError("--throw", "no height given and the config has no flight.throw_activation_height_m")
 
 
+# Durations and counts below these mean nothing a vehicle can fly (1e-320 s is not a duration): refused.
+MIN_DURATION_S = 0.01
+MIN_LAPS = 1e-3
+
+
 def _check_args(args: argparse.Namespace) -> None:
     for flag, value in (("--takeoff", args.takeoff), ("--throw", args.throw)):
         if value is not None and not (math.isfinite(value) and 0.3 <= value <= 100.0):
             raise InputError(flag, f"height must be in [0.3, 100] m, got {value}")
-    if args.laps is not None and not (math.isfinite(args.laps) and args.laps > 0):
-        raise InputError("--laps", f"must be > 0, got {args.laps}")
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise InputError("--duration", f"must be > 0 s, got {args.duration}")
-    if not (math.isfinite(args.heartbeat_timeout) and args.heartbeat_timeout > 0):
-        raise InputError("--heartbeat-timeout", f"must be > 0 s, got {args.heartbeat_timeout}")
+    if args.laps is not None and not (math.isfinite(args.laps) and MIN_LAPS <= args.laps <= 1e6):
+        raise InputError("--laps", f"must be in [{MIN_LAPS:g}, 1e6], got {args.laps}")
+    if args.duration is not None and not (math.isfinite(args.duration) and MIN_DURATION_S <= args.duration <= 1e6):
+        raise InputError("--duration", f"must be in [{MIN_DURATION_S:g}, 1e6] s, got {args.duration}")
+    if not (math.isfinite(args.heartbeat_timeout) and MIN_DURATION_S <= args.heartbeat_timeout <= 3600):
+        raise InputError("--heartbeat-timeout", f"must be in [{MIN_DURATION_S:g}, 3600] s, got {args.heartbeat_timeout}")
     for flag, value in (("--ready-timeout", getattr(args, "ready_timeout", 120.0)), ("--takeoff-timeout", getattr(args, "takeoff_timeout", None))):
-        if value is not None and not (math.isfinite(value) and 0 < value <= 3600):
-            raise InputError(flag, f"must be in (0, 3600] s, got {value}")
+        if value is not None and not (math.isfinite(value) and MIN_DURATION_S <= value <= 3600):
+            raise InputError(flag, f"must be in [{MIN_DURATION_S:g}, 3600] s, got {value}")
     if args.target_system is not None and not 1 <= args.target_system <= 255:
         raise InputError("--target-system", f"must be a MAVLink system id in 1..255, got {args.target_system}")
 
@@ -252,7 +257,8 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None, on_start:
 
     from pf_offboard.shipped import resolve_config
 
-    endpoint = parse_endpoint(args.connect)  # InputError before anything is opened
+    endpoint = parse_endpoint(args.connect)
+    endpoint.check_local()  # InputError before anything is opened
     signing_key = signing_key_from_args(args)
     args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     config = load_config(args.config)

@@ -50,6 +50,30 @@ class Endpoint:
     address: str
     port: int
 
+    def check_local(self) -> None:
+        """Bad input found before opening (InputError naming --connect): a serial device that does
+        not exist or is not a character device (a regular file, a directory, /dev/null is one: it
+        is opened and fails then)."""
+        if self.kind != "serial":
+            return
+        import stat
+
+        try:
+            st = os.stat(self.address)
+        except (OSError, ValueError) as exc:
+            raise InputError("--connect", f"serial device {_clip(self.address)}: {getattr(exc, 'strerror', None) or exc}") from None
+        if not stat.S_ISCHR(st.st_mode):
+            raise InputError("--connect", f"serial device {_clip(self.address)}: not a character device")
+        try:  # a character device that is not a terminal (/dev/zero, /dev/null) is no serial port
+            fd = os.open(self.address, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0))
+        except OSError:
+            return  # busy or not permitted: opening it for real reports that (a link error)
+        try:
+            if not os.isatty(fd):
+                raise InputError("--connect", f"serial device {_clip(self.address)}: not a serial port (not a terminal device)")
+        finally:
+            os.close(fd)
+
     def mavutil_url(self) -> str:
         """The string pymavlink's ``mavlink_connection`` understands."""
         if self.kind == "serial":
@@ -85,9 +109,29 @@ def parse_endpoint(text: str) -> Endpoint:
         return Endpoint(kind, address, value)
     if not 1 <= value <= 65535:
         raise InputError(field, f"{text!r}: port {value} is outside 1..65535")
-    if not _HOST_RE.match(address):
-        raise InputError(field, f"{text!r}: host {address!r} is not a host name or IPv4 address")
+    why = _host_problem(address)
+    if why:
+        raise InputError(field, f"{_clip(text)}: host {_clip(address)!r} {why}")
     return Endpoint(kind, address, value)
+
+
+def _clip(text: str, limit: int = 80) -> str:
+    return text if len(text) <= limit else f"{text[: limit // 2]}...{text[-limit // 2 :]}"
+
+
+def _host_problem(host: str) -> str:
+    """Why ``host`` is not an IPv4 address or a host name ("" if it is one). Pure: no lookup."""
+    if not _HOST_RE.match(host):
+        return "is not a host name or IPv4 address"
+    parts = host.split(".")
+    if all(p.isdigit() for p in parts):  # numeric: must be a dotted-quad IPv4 address
+        if len(parts) != 4 or any(len(p) > 3 or int(p) > 255 for p in parts):
+            return "is not an IPv4 address (four numbers 0..255)"
+        return ""
+    labels = host[:-1].split(".") if host.endswith(".") else parts  # a trailing dot: fully qualified
+    if len(host) > 253 or any(not 1 <= len(p) <= 63 or p.startswith("-") or p.endswith("-") for p in labels):
+        return "is not a valid host name (labels of 1-63 letters, digits or '-', not starting or ending with '-')"
+    return ""
 
 
 @dataclass(frozen=True)

@@ -291,6 +291,7 @@ def excite(args: argparse.Namespace, spec: ExcitationSpec, stream: TextIO) -> Ex
     from pf_offboard.errors import LinkError
 
     endpoint = parse_endpoint(args.connect)
+    endpoint.check_local()
     config = load_config(args.config)
     settings = flight_settings(config, argparse.Namespace(output=args.output, end_action=None))
     if args.takeoff is not None and not (math.isfinite(args.takeoff) and 0.3 <= args.takeoff <= 100.0):
