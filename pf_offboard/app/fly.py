@@ -18,7 +18,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any, TextIO
 
 from pf_offboard.errors import InputError, LinkError
@@ -81,7 +81,12 @@ class FlightSettings:
 
 
 def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
-    """Read ``config.flight`` (tolerating a config without one) and apply flags; validate."""
+    """Read ``config.flight`` (tolerating a config without one) and apply the flags; validate."""
+    return flight_settings_for(config, output=args.output, end_action=args.end_action)
+
+
+def flight_settings_for(config: Any, output: str | None = None, end_action: str | None = None) -> FlightSettings:
+    """``config.flight`` with an output mode / end action given by the user (None: the config's)."""
     flight = getattr(config, "flight", None)
 
     def get(name: str, default: Any) -> Any:
@@ -89,11 +94,11 @@ def flight_settings(config: Any, args: argparse.Namespace) -> FlightSettings:
         return default if value is None else value
 
     s = FlightSettings(
-        output_mode=args.output or get("output_mode", "acceleration"),
+        output_mode=output or get("output_mode", "acceleration"),
         setpoint_rate_hz=float(get("setpoint_rate_hz", 50.0)),
         state_timeout_s=float(get("state_timeout_s", 0.5)),
         hover_thrust=get("hover_thrust", None),
-        end_action=args.end_action or get("end_action", "hold"),
+        end_action=end_action or get("end_action", "hold"),
         attitude_time_constant_s=_attitude_time_constant(config, get("attitude_time_constant_s", None)),
         velocity_correction_s=get("velocity_correction_s", None),
     )
@@ -247,14 +252,56 @@ def signing_key_from_args(args: argparse.Namespace) -> bytes | None:
         raise InputError("--signing-key", f"{path}: {exc}") from None
 
 
+@dataclass(frozen=True)
+class FlyRequest:
+    """Everything ``fly`` was asked for, typed and validated: built once from the command line
+    (:func:`request_from_args`); nothing below sees ``argparse``."""
+
+    connect: str
+    config_path: str  # resolved: a file
+    launch: str  # "takeoff" | "airborne" | "throw"
+    height_m: float  # take-off altitude or throw activation height; nan when airborne
+    autopilot: str = "auto"
+    laps: float | None = None
+    duration_s: float | None = None
+    target_system: int | None = None
+    heartbeat_timeout_s: float = 10.0
+    state_source: str = "local_position"
+    set_guid_options: bool = False
+    experimental_output: bool = False
+    ready_timeout_s: float = 120.0
+    takeoff_timeout_s: float | None = None
+    log_dir: str | None = None
+    quiet: bool = False
+    json: bool = False
+
+
+def request_from_args(args: argparse.Namespace, config: Any) -> FlyRequest:
+    """The typed request of ``fly``'s flags (heights from the config where not given); InputError
+    naming the flag for anything out of range."""
+    _heights_from_config(args, config)
+    _check_args(args)
+    launch = "takeoff" if args.takeoff is not None else "throw" if args.throw is not None else "airborne"
+    height = args.takeoff if args.takeoff is not None else args.throw if args.throw is not None else math.nan
+    return FlyRequest(
+        connect=args.connect, config_path=str(args.config), launch=launch, height_m=float(height),
+        autopilot=args.autopilot, laps=args.laps, duration_s=args.duration, target_system=args.target_system,
+        heartbeat_timeout_s=args.heartbeat_timeout, state_source=args.state_source,
+        set_guid_options=bool(getattr(args, "set_guid_options", False)),
+        experimental_output=bool(getattr(args, "experimental_output", False)),
+        ready_timeout_s=getattr(args, "ready_timeout", 120.0), takeoff_timeout_s=getattr(args, "takeoff_timeout", None),
+        log_dir=args.log_dir, quiet=bool(args.quiet), json=bool(getattr(args, "json", False)),
+    )  # fmt: skip
+
+
 def fly(args: argparse.Namespace, status_stream: TextIO | None = None, on_start: Callable[[Any], None] | None = None) -> FlyOutcome:
     """Parse, validate and fly; prints the summary and the log path. Never hangs on a dead link.
 
-    ``on_start(bridge)`` (optional) is called once the flight's bridge exists (benchmarks watch it).
+    ``on_start(flight)`` (optional) is called once the :class:`~pf_offboard.app.flight.Flight`
+    exists (benchmarks watch it).
     """
     from pf_offboard.app.link import parse_endpoint
     from pf_offboard.config import load_config
-
     from pf_offboard.shipped import resolve_config
 
     endpoint = parse_endpoint(args.connect)
@@ -262,16 +309,23 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None, on_start:
     signing_key = signing_key_from_args(args)
     args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     config = load_config(args.config)
-    _heights_from_config(args, config)
-    _check_args(args)
+    request = request_from_args(args, config)
     settings = flight_settings(config, args)
+    return fly_request(request, endpoint, config, settings, signing_key, status_stream, on_start)
+
+
+def fly_request(
+    request: FlyRequest, endpoint: Any, config: Any, settings: FlightSettings, signing_key: bytes | None = None,
+    status_stream: TextIO | None = None, on_start: Callable[[Any], None] | None = None,
+) -> FlyOutcome:  # fmt: skip
+    """Fly a validated request (see :func:`fly`)."""
     # a path outside the fence is bad input: refused before any traffic (a lat/lon path: once it
     # is in the local frame, after connecting but still before any setpoint or command)
     fence = envelope_fence(config) if config.path.geodetic is None else None
-    if args.log_dir:
+    if request.log_dir:
         from pf_offboard.logs._io import make_dir
 
-        make_dir(args.log_dir, "--log-dir")  # an unwritable log directory is bad input: found before connecting
+        make_dir(request.log_dir, "--log-dir")  # an unwritable log directory is bad input: found before connecting
     stream = status_stream if status_stream is not None else sys.stderr
     from pf_offboard.control.tuning import real_vehicle_warning
 
@@ -279,24 +333,41 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None, on_start:
     if caution:  # before connecting: the paper's gains limit-cycle on a real inner loop
         print(f"pf-offboard fly: warning: {caution}", file=stream)
     try:
-        return asyncio.run(_fly(args, endpoint, config, settings, stream, fence, signing_key, on_start))
+        return asyncio.run(_fly(request, endpoint, config, settings, stream, fence, signing_key, on_start))
     except LinkError as exc:
         print(f"pf-offboard fly: link error: {exc}", file=stream)
         return FlyOutcome(3, str(exc), None, None, None)
 
 
-async def _fly(
-    args: argparse.Namespace, endpoint: Any, config: Any, settings: FlightSettings, stream: TextIO, fence: Any = None,
-    signing_key: bytes | None = None, on_start: Callable[[Any], None] | None = None,
-) -> FlyOutcome:  # fmt: skip
+def stream_requests(state_source: str, setpoint_rate_hz: float) -> list[tuple[int, float, str]]:
+    """The telemetry a flight needs, as (message id, rate Hz, name): the state at the setpoint rate
+    (a fresh sample drives each setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s
+    where honoured."""
     from pymavlink.dialects.v20 import common as mavlink2
 
-    from pf_offboard.app.bridge import Bridge, BridgeOptions, EndSpec
+    if state_source == "local_position":
+        state = (mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED, setpoint_rate_hz, "LOCAL_POSITION_NED")
+    else:
+        state = (mavlink2.MAVLINK_MSG_ID_ODOMETRY, setpoint_rate_hz, "ODOMETRY")
+    return [
+        state,
+        (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, setpoint_rate_hz, "ATTITUDE_QUATERNION"),
+        (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0, "HEARTBEAT"),
+    ]
+
+
+async def _fly(
+    request: FlyRequest, endpoint: Any, config: Any, settings: FlightSettings, stream: TextIO, fence: Any = None,
+    signing_key: bytes | None = None, on_start: Callable[[Any], None] | None = None,
+) -> FlyOutcome:  # fmt: skip
+    from pf_offboard.app.dialects import dialect_for
     from pf_offboard.app.encoders import Encoder
     from pf_offboard.app.estimator import Estimator
+    from pf_offboard.app.flight import Flight, FlightOptions
     from pf_offboard.app.link import Link
     from pf_offboard.app.pipeline import Pipeline
-    from pf_offboard.app.profiles import Autopilot, output_mode_refusal, select_profile
+    from pf_offboard.app.profiles import select_profile
+    from pf_offboard.app.rules import EndSpec
     from pf_offboard.control import controller_from_config
     from pf_offboard.logs.flightlog import FlightLog
     from pf_offboard.logs.summary import SummaryAccumulator
@@ -310,19 +381,21 @@ async def _fly(
     summary_acc = SummaryAccumulator()  # running sums: the steps themselves go to the CSV only
     log: FlightLog | None = None
     try:
-        target = await link.wait_heartbeat(args.heartbeat_timeout, args.target_system)
-        profile = select_profile(args.autopilot, target.autopilot)
-        refusal = output_mode_refusal(profile, settings.output_mode)
+        target = await link.wait_heartbeat(request.heartbeat_timeout_s, request.target_system)
+        profile = select_profile(request.autopilot, target.autopilot)
+        dialect = dialect_for(profile)
+        refusal = dialect.output_refusal(settings.output_mode)
         if refusal:
-            if not getattr(args, "experimental_output", False):
+            if not request.experimental_output:
                 # before the log, the reader and any command or setpoint
                 raise InputError("--output", f"{settings.output_mode} refused on {profile.name}: {refusal}")
             print(f"pf-offboard fly: warning: {settings.output_mode} on {profile.name} is experimental: {refusal}", file=stream)
         link.set_source_system(target.system)
-        log_dir = Path(args.log_dir) if args.log_dir else Path("flights")
+        log_dir = Path(request.log_dir) if request.log_dir else Path("flights")
         try:
-            log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
-            log = FlightLog.open(log_dir, config_path=args.config, warn=lambda text: print(f"pf-offboard fly: warning: {text}", file=stream, flush=True))
+            log_dir = Path(request.log_dir) if request.log_dir else default_log_dir()
+            log = FlightLog.open(log_dir, config_path=request.config_path,
+                                 warn=lambda text: print(f"pf-offboard fly: warning: {text}", file=stream, flush=True))  # fmt: skip
         except OSError as exc:
             raise InputError("--log-dir", f"cannot write the logs in {log_dir}: {exc.strerror or exc}") from None
         flight_log = log
@@ -334,23 +407,21 @@ async def _fly(
             from pf_offboard.app.origin import localise_config
 
             config = await localise_config(link, config, stream)
-            flight_log.write_config(args.config, config)
+            flight_log.write_config(request.config_path, config)
             follower = controller_from_config(config)
         assert follower is not None
 
-        launch = "takeoff" if args.takeoff is not None else "throw" if args.throw is not None else "airborne"
-        height = args.takeoff if args.takeoff is not None else args.throw if args.throw is not None else math.nan
         path = follower.path
-        options = BridgeOptions(
-            launch=launch,
-            height_m=height,
-            end=EndSpec(laps=args.laps, duration_s=args.duration),
+        options = FlightOptions(
+            launch=request.launch,
+            height_m=request.height_m,
+            end=EndSpec(laps=request.laps, duration_s=request.duration_s),
             end_action=settings.end_action,
             setpoint_rate_hz=settings.setpoint_rate_hz,
             state_timeout_s=settings.state_timeout_s,
-            status=not args.quiet,
-            ready_timeout_s=getattr(args, "ready_timeout", 120.0),
-            takeoff_timeout_s=getattr(args, "takeoff_timeout", None),
+            status=not request.quiet,
+            ready_timeout_s=request.ready_timeout_s,
+            takeoff_timeout_s=request.takeoff_timeout_s,
         )
         encoder = Encoder(
             settings.output_mode, profile, target.system, target.component,
@@ -358,65 +429,39 @@ async def _fly(
             time_constant_s=settings.attitude_time_constant_s,
             max_body_rate_rad_s=_rate_bound(config),
         )  # fmt: skip
-        pipeline = Pipeline(follower, encoder, Estimator(args.state_source, settings.velocity_correction_s))
+        pipeline = Pipeline(follower, encoder, Estimator(request.state_source, settings.velocity_correction_s))
         safety = getattr(config, "safety", None) or SafetyConfig()
         monitor = EnvelopeMonitor(safety, fence if fence is not None else envelope_fence(config), path.length_m, path.closed)
-        bridge = Bridge(
+        flight = Flight(
             link, profile, pipeline, options, path.length_m, path.closed, path.lam_max,
             on_step=lambda step: (flight_log.step(step.record), summary_acc.add(step.record)),  # not kept: flights can be long
-            status_stream=stream, monitor=monitor,
+            status_stream=stream, monitor=monitor, dialect=dialect,
         )  # fmt: skip
-        link.start_reading(bridge.on_message)
+        link.start_reading(flight.on_message)
         if on_start is not None:
-            on_start(bridge)
+            on_start(flight)
 
         async def setup() -> None:
-            # telemetry at the rates we need: state at the setpoint rate (a fresh sample drives
-            # each setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s where honoured.
-            state_id = mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED if args.state_source == "local_position" else mavlink2.MAVLINK_MSG_ID_ODOMETRY
+            requests = stream_requests(request.state_source, settings.setpoint_rate_hz)
+            await flight.commander.request_intervals(requests)
             # each request three times: idempotent, and a lossy link must not leave HEARTBEAT at 1 Hz
-            # (the lost-HEARTBEAT watchdog counts on it)
-            state_name = "LOCAL_POSITION_NED" if args.state_source == "local_position" else "ODOMETRY"
-            await bridge.request_intervals([
-                (state_id, settings.setpoint_rate_hz, state_name),
-                (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz, "ATTITUDE_QUATERNION"),
-                (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0, "HEARTBEAT"),
-            ])  # fmt: skip
-            for _ in range(2):  # twice more, not waited for: idempotent
-                for msg_id, rate in ((state_id, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz), (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0)):
-                    bridge.request_interval(msg_id, rate)
-            await read_setpoint_mapping(bridge, profile, settings, pipeline, stream)
-            if profile.autopilot is Autopilot.ARDUPILOT:
-                await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
-                if settings.output_mode == "acceleration":
-                    jerk = min(await bridge.read_param("PSC_JERK_XY"), await bridge.read_param("PSC_JERK_Z"))
-                    if jerk < 20.0:
-                        print(f"pf-offboard fly: warning: ArduPilot jerk-limits acceleration targets (PSC_JERK_XY/Z = {jerk:g} m/s^3): "
-                              "expect lag and, at high gains, oscillation; raise PSC_JERK_XY/Z or use --output rates", file=stream)  # fmt: skip
+            # (the lost-HEARTBEAT watchdog counts on it); twice more, not waited for
+            for _ in range(2):
+                for msg_id, rate, _name in requests:
+                    flight.commander.request_interval(msg_id, rate)
+            await prepare_output(flight, dialect, settings, request.set_guid_options, stream, warnings=True)
 
         loop = asyncio.get_running_loop()
         # SIGTERM (systemd, docker stop) and SIGHUP (the terminal closed) end the flight like Ctrl-C:
         # hold requested, summary printed, logs closed.
         stops = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGHUP: "SIGHUP"}
         for signum, name in stops.items():
-            loop.add_signal_handler(signum, bridge.request_stop, f"stop requested ({name})")
+            loop.add_signal_handler(signum, flight.request_stop, f"stop requested ({name})")
         # The path, its caches and pymavlink's tables live for the whole flight: take them out of
         # the cyclic collector's scans so full collections do not stall the 250 Hz loop.
         gc.freeze()
         try:
-            async with asyncio.TaskGroup() as tg:
-                flight = tg.create_task(bridge.fly(setup))
-                helpers = [tg.create_task(bridge.keepalive()), tg.create_task(bridge.heartbeat()), tg.create_task(bridge.status_line())]
-                result = await flight
-                for task in helpers:  # they poll the phase once a period (HEARTBEAT: 1 s): end them now
-                    task.cancel()
-        except BaseExceptionGroup as group:
-            # TaskGroup wraps what a task raised: hand bad input (InputError -> exit 2, e.g. GUID_OPTIONS
-            # refused in setup) and link failures (-> exit 3) on as themselves, not as a traceback.
-            first = _first_leaf(group)
-            if isinstance(first, (InputError, LinkError)):
-                raise first from None
-            raise
+            result = await run_flight(flight, setup)
         finally:
             for signum in stops:
                 loop.remove_signal_handler(signum)
@@ -426,15 +471,48 @@ async def _fly(
             log.close()
     assert log is not None
     summary = summary_acc.result() if summary_acc.steps else None
-    _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, bridge)
-    _write_summary_json(args, result.exit_code, result.reason, summary, log.paths.tlog.parent, config)
+    _report(stream, result.reason, result.exit_code, summary, log.paths.tlog.parent, flight)
+    _write_summary_json(request.json, result.exit_code, result.reason, summary, log.paths.tlog.parent, config)
     return FlyOutcome(
         result.exit_code, result.reason, log.paths.tlog.parent, summary, result.activation_time_s, result.breach,
         result.breach_time_s, link.counters, pipeline.estimator,
     )  # fmt: skip
 
 
-def _write_summary_json(args: argparse.Namespace, code: int, reason: str, summary: Any, log_dir: Path, config: Any) -> None:
+async def run_flight(flight: Any, setup: Callable[[], Awaitable[None]] | None = None) -> Any:
+    """One TaskGroup: the flight, the keep-alive / watchdogs, our HEARTBEAT and the status line.
+    Bad input (InputError -> exit 2, e.g. GUID_OPTIONS refused in setup) and link failures
+    (LinkError -> exit 3) raised in a task come out as themselves, not as an exception group."""
+    try:
+        async with asyncio.TaskGroup() as tg:
+            task = tg.create_task(flight.fly(setup))
+            helpers = [tg.create_task(flight.keepalive()), tg.create_task(flight.heartbeat()), tg.create_task(flight.status_line())]
+            result = await task
+            for helper in helpers:  # they poll the phase once a period (HEARTBEAT: 1 s): end them now
+                helper.cancel()
+    except BaseExceptionGroup as group:
+        first = _first_leaf(group)
+        if isinstance(first, (InputError, LinkError)):
+            raise first from None
+        raise
+    return result
+
+
+async def prepare_output(flight: Any, dialect: Any, settings: FlightSettings, allow_set_guid_options: bool, stream: TextIO,
+                         warnings: bool = True) -> None:  # fmt: skip
+    """The dialect reads what the output mode needs (hover thrust, tilt mapping, GUID_OPTIONS) and
+    sets it on the encoder; ``warnings``: also what it warns about (ArduPilot's jerk limits)."""
+    pipeline = flight.pipeline
+    pipeline.encoder = await dialect.read_setpoint_mapping(
+        flight.params, settings.output_mode, settings.hover_thrust, pipeline.encoder, lambda line: print(line, file=stream)
+    )
+    await dialect.ensure_output_requirements(flight.params, settings.output_mode, allow_set_guid_options)
+    if warnings:
+        for line in await dialect.output_warnings(flight.params, settings.output_mode):
+            print(f"pf-offboard fly: warning: {line}", file=stream)
+
+
+def _write_summary_json(as_json: bool, code: int, reason: str, summary: Any, log_dir: Path, config: Any) -> None:
     """``LOG_DIR/summary.json`` always; with ``--json`` the same report on stdout."""
     from pf_offboard.logs.summary import flight_report, report_json, write_report
 
@@ -443,7 +521,7 @@ def _write_summary_json(args: argparse.Namespace, code: int, reason: str, summar
         write_report(report, log_dir)
     except OSError as exc:  # a full disk: the flight's outcome is still reported on the terminal
         print(f"pf-offboard fly: warning: cannot write {log_dir}/summary.json: {exc.strerror or exc}", file=sys.stderr)
-    if getattr(args, "json", False):
+    if as_json:
         print(report_json(report))
 
 
@@ -454,66 +532,21 @@ def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[typ
     return first
 
 
-async def read_setpoint_mapping(bridge: Any, profile: Any, settings: FlightSettings, pipeline: Any, stream: TextIO) -> None:
-    """Read what the encoder needs to know of the autopilot's setpoint mapping and set it.
-
-    attitude / rates: the hover thrust (unless the config gives one); a value no vehicle hovers at
-    is a link error. acceleration: whether the autopilot tilts from g alone
-    (:attr:`Profile.accel_tilt_param`, PX4's MPC_ACC_DECOUPLE); without an answer the profile's
-    default (PX4's own default) is kept and a warning says so.
-    """
-    if settings.output_mode != "acceleration":
-        if settings.hover_thrust is None:
-            hover = await bridge.read_param(profile.hover_thrust_param)
-            if not 0.05 <= hover <= 0.95:
-                raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
-            pipeline.encoder = pipeline.encoder.with_hover_thrust(float(hover))
-        return
-    if profile.accel_tilt_param is None:
-        return
-    try:
-        value = await bridge.read_param(profile.accel_tilt_param)
-    except LinkError as exc:
-        default = "1 (tilt from g alone)" if profile.accel_tilt_from_gravity else "0"
-        print(f"pf-offboard: warning: {exc}; assuming {profile.accel_tilt_param} = {default}, the autopilot's default", file=stream)
-        return
-    if value not in (0.0, 1.0):
-        raise LinkError(f"{profile.accel_tilt_param} = {value:g} is neither 0 nor 1")
-    pipeline.encoder = pipeline.encoder.with_tilt_from_gravity(profile.tilts_from_gravity(value))
-
-
-async def _check_guid_options(bridge: Any, required: int, allow_set: bool, output_mode: str) -> None:
-    """ArduPilot: make sure GUID_OPTIONS has the bits the output mode needs, or refuse."""
-    value = int(await bridge.read_param("GUID_OPTIONS"))
-    if value & required == required:
-        return
-    missing = required & ~value
-    if not allow_set:
-        raise InputError(
-            "--set-guid-options",
-            f"ArduPilot GUID_OPTIONS={value} lacks bit(s) {missing} needed by --output {output_mode} "
-            "(8: thrust as thrust; 16: no XY position correction); set them on the vehicle or pass --set-guid-options",
-        )
-    from pymavlink.dialects.v20 import common as mavlink2
-
-    await bridge.write_param("GUID_OPTIONS", float(value | required), mavlink2.MAV_PARAM_TYPE_INT32)
-
-
-def _report(stream: TextIO, reason: str, code: int, summary: Any, log_dir: Path, bridge: Any) -> None:
+def _report(stream: TextIO, reason: str, code: int, summary: Any, log_dir: Path, flight: Any) -> None:
     """The end-of-flight report on ``stream``: outcome, safety, summary, what the link and estimator refused."""
     lines = [f"pf-offboard fly: {reason} (exit {code})"]
-    if bridge.breach is not None:
-        when = f" at t = {bridge.breach_time_s:.2f} s" if bridge.breach_time_s is not None else ""
-        lines.append(f"  safety: {bridge.breach.kind.value}{when}: {bridge.breach.reason}")
-    if bridge.monitor is not None:
-        lines.append(f"  safety: max measured tilt {math.degrees(bridge.monitor.max_tilt_seen_rad):.1f} deg; fence {bridge.monitor.fence.describe()}")
-    if bridge.pipeline.replaced_steps:
-        lines.append(f"  safe hold sent instead of a non-finite command {bridge.pipeline.replaced_steps} times")
+    if flight.breach is not None:
+        when = f" at t = {flight.breach_time_s:.2f} s" if flight.breach_time_s is not None else ""
+        lines.append(f"  safety: {flight.breach.kind.value}{when}: {flight.breach.reason}")
+    if flight.monitor is not None:
+        lines.append(f"  safety: max measured tilt {math.degrees(flight.monitor.max_tilt_seen_rad):.1f} deg; fence {flight.monitor.fence.describe()}")
+    if flight.pipeline.replaced_steps:
+        lines.append(f"  safe hold sent instead of a non-finite command {flight.pipeline.replaced_steps} times")
     if summary is not None:
         lines += ["  " + line for line in summary.lines()]
-    link = bridge.link
+    link = flight.link
     lines.append(f"  link                {'signed' if link.signing else 'unsigned'}; {link.counters.line()}")
-    est = bridge.pipeline.estimator
+    est = flight.pipeline.estimator
     if est.rejected:
         lines.append(
             f"  state samples       rejected {est.rejected}: {est.rejected_old} old/duplicated, {est.clock_jumps} clock jumps "

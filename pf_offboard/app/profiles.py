@@ -7,6 +7,7 @@ Pure data and pure functions (no I/O). The facts come from the autopilots' sourc
 from __future__ import annotations
 
 import enum
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from pf_offboard.errors import InputError
@@ -71,15 +72,21 @@ class Profile:
     accel_tilt_from_gravity: bool = True
     # the parameter that says so (1: tilt from g alone; 0: from the whole demand), or None
     accel_tilt_param: str | None = None
+    # HEARTBEAT custom_mode bits that identify our mode (PX4: the main mode only; it leaves the
+    # sub mode 0 in OFFBOARD)
+    offboard_mode_mask: int = 0xFFFFFFFF
+    # PX4 packs an INT32 parameter's bytes into PARAM_VALUE's float; ArduPilot casts it
+    params_bytewise: bool = False
+    # GUID_OPTIONS bits each output mode needs, as (output mode, bits) pairs (ArduPilot only)
+    guid_options: tuple[tuple[str, int], ...] = ()
+    # output modes refused by default, as (output mode, why) pairs (see output_mode_refusal)
+    refused_outputs: tuple[tuple[str, str], ...] = ()
+    # HEARTBEAT custom_mode -> human-readable name
+    mode_names: Callable[[int], str] = str
 
     @property
     def name(self) -> str:
         return self.autopilot.value
-
-    @property
-    def params_bytewise(self) -> bool:
-        """PX4 packs an INT32 parameter's bytes into PARAM_VALUE's float; ArduPilot casts it."""
-        return self.autopilot is Autopilot.PX4
 
     def tilts_from_gravity(self, reported: float | None) -> bool:
         """Whether the autopilot tilts from g alone for acceleration setpoints, given the value it
@@ -90,21 +97,19 @@ class Profile:
 
     def is_offboard(self, custom_mode: int) -> bool:
         """True when a HEARTBEAT custom_mode says the vehicle is in our mode."""
-        if self.autopilot is Autopilot.PX4:
-            # compare main mode only; PX4 leaves sub mode 0 in OFFBOARD.
-            return (custom_mode >> 16) & 0xFF == 6
-        return custom_mode == self.offboard_custom_mode
+        mask = self.offboard_mode_mask
+        return custom_mode & mask == self.offboard_custom_mode & mask
 
     def mode_name(self, custom_mode: int) -> str:
         """Human-readable mode for the status line."""
-        if self.autopilot is Autopilot.PX4:
-            main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
-            mains = {1: "MANUAL", 2: "ALTCTL", 3: "POSCTL", 4: "AUTO", 5: "ACRO", 6: "OFFBOARD", 7: "STABILIZED"}
-            subs = {2: "TAKEOFF", 3: "LOITER", 4: "MISSION", 5: "RTL", 6: "LAND"}
-            text = mains.get(main, f"MODE{main}")
-            return f"{text}.{subs.get(sub, sub)}" if main == 4 else text
-        names = {0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER", 6: "RTL", 9: "LAND", 16: "POSHOLD", 17: "BRAKE", 18: "THROW"}
-        return names.get(custom_mode, f"MODE{custom_mode}")
+        return self.mode_names(custom_mode)
+
+    def custom_mode_of(self, mode: ModeRequest) -> int:
+        """The HEARTBEAT custom_mode of one of our modes (offboard, hold, land)."""
+        for ours, custom in ((self.offboard, self.offboard_custom_mode), (self.hold, self.hold_custom_mode), (self.land, self.land_custom_mode)):
+            if mode is ours:
+                return custom
+        raise KeyError(mode.name)
 
     def required_guid_options(self, output_mode: str) -> int:
         """GUID_OPTIONS bits an output mode needs (ArduPilot only; 0 for PX4).
@@ -116,9 +121,33 @@ class Profile:
           velocity as the velocity target (see encoders), and with bit 4 that XY position
           correction, a second outer loop fighting the path follower, is off.
         """
-        if self.autopilot is not Autopilot.ARDUPILOT:
-            return 0
-        return 8 if output_mode in ("attitude", "rates") else 16
+        return dict(self.guid_options).get(output_mode, 0)
+
+
+def px4_mode_name(custom_mode: int) -> str:
+    main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+    mains = {1: "MANUAL", 2: "ALTCTL", 3: "POSCTL", 4: "AUTO", 5: "ACRO", 6: "OFFBOARD", 7: "STABILIZED"}
+    subs = {2: "TAKEOFF", 3: "LOITER", 4: "MISSION", 5: "RTL", 6: "LAND"}
+    text = mains.get(main, f"MODE{main}")
+    return f"{text}.{subs.get(sub, sub)}" if main == 4 else text
+
+
+def ardupilot_mode_name(custom_mode: int) -> str:
+    names = {0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER", 6: "RTL", 9: "LAND", 16: "POSHOLD", 17: "BRAKE", 18: "THROW"}
+    return names.get(custom_mode, f"MODE{custom_mode}")
+
+
+EXPERIMENTAL_OUTPUT_FLAG = "--experimental-output"
+
+# Measured on the real autopilots: ArduPilot integrates acceleration targets into its own
+# velocity/position targets and jerk-limits them (PSC_JERK_XY/Z); on ArduCopter SITL
+# `acceleration` output oscillated by metres even with PSC_JERK_XY/Z = 50, while `attitude`
+# (1.5 Hz / 1.0 gains: 6.6 cm cross-track RMS) and `rates` (τ = 0.25 s: 4 cm) followed the path.
+_ARDUPILOT_ACCELERATION_REFUSAL = (
+    "ArduPilot jerk-limits and integrates acceleration targets (PSC_JERK_XY/Z); on ArduCopter SITL this output "
+    "oscillated by metres even with PSC_JERK_XY/Z = 50. Use --output attitude on ArduPilot "
+    f"(or rates); {EXPERIMENTAL_OUTPUT_FLAG} flies it anyway"
+)
 
 
 PX4 = Profile(
@@ -132,6 +161,9 @@ PX4 = Profile(
     hover_thrust_param="MPC_THR_HOVER",
     attitude_rates_ff=(False, False, True),
     accel_tilt_param="MPC_ACC_DECOUPLE",
+    offboard_mode_mask=0xFF << 16,
+    params_bytewise=True,
+    mode_names=px4_mode_name,
 )
 
 ARDUPILOT = Profile(
@@ -145,6 +177,9 @@ ARDUPILOT = Profile(
     hover_thrust_param="MOT_THST_HOVER",
     attitude_rates_ff=(True, True, True),
     accel_with_velocity=True,
+    guid_options=(("attitude", 8), ("rates", 8), ("acceleration", 16)),
+    refused_outputs=(("acceleration", _ARDUPILOT_ACCELERATION_REFUSAL),),
+    mode_names=ardupilot_mode_name,
 )
 
 PROFILES: dict[str, Profile] = {"px4": PX4, "ardupilot": ARDUPILOT}
@@ -179,24 +214,9 @@ def check_output_mode(output_mode: str) -> str:
     return output_mode
 
 
-EXPERIMENTAL_OUTPUT_FLAG = "--experimental-output"
-
-
 def output_mode_refusal(profile: Profile, output_mode: str) -> str:
-    """Why ``fly`` refuses ``output_mode`` on this autopilot by default ("" if it does not).
-
-    Measured on the real autopilots (issue 8): ArduPilot integrates acceleration targets into its
-    own velocity/position targets and jerk-limits them (PSC_JERK_XY/Z); on ArduCopter SITL
-    `acceleration` output oscillated by metres even with PSC_JERK_XY/Z = 50, while `attitude`
-    (1.5 Hz / 1.0 gains: 6.6 cm cross-track RMS) and `rates` (τ = 0.25 s: 4 cm) followed the path.
-    """
-    if profile.autopilot is Autopilot.ARDUPILOT and output_mode == "acceleration":
-        return (
-            "ArduPilot jerk-limits and integrates acceleration targets (PSC_JERK_XY/Z); on ArduCopter SITL this output "
-            "oscillated by metres even with PSC_JERK_XY/Z = 50. Use --output attitude on ArduPilot "
-            f"(or rates); {EXPERIMENTAL_OUTPUT_FLAG} flies it anyway"
-        )
-    return ""
+    """Why ``fly`` refuses ``output_mode`` on this autopilot by default ("" if it does not)."""
+    return dict(profile.refused_outputs).get(output_mode, "")
 
 
 def is_armed(base_mode: int) -> bool:

@@ -3,7 +3,7 @@
 A vehicle process (forked, so it has its own interpreter lock) sends a PX4 HEARTBEAT and then
 ATTITUDE_QUATERNION + LOCAL_POSITION_NED at 250 Hz along the paper path, slightly off it; the
 app side is the real thing — :class:`~pf_offboard.app.link.Link` (pymavlink, event-loop reader),
-:class:`~pf_offboard.app.bridge.Bridge` in its following phase, the :class:`Pipeline` with the
+:class:`~pf_offboard.app.flight.Flight` in its following phase, the :class:`Pipeline` with the
 paper's :class:`PathFollower` — and answers each state sample with a setpoint. The vehicle stamps
 each LOCAL_POSITION_NED just before ``sendto`` and each setpoint right after ``recv`` and matches
 them by ``time_boot_ms``: the figure includes both loopback socket traversals, decoding, the
@@ -87,7 +87,9 @@ def _vehicle(conn: Connection, samples: int, warmup: int) -> None:
 
 
 async def _app(port: int, samples: int, in_app: list[float]) -> None:
-    from pf_offboard.app.bridge import Bridge, BridgeOptions, EndSpec, Phase
+    from pf_offboard.app.flight import Flight, FlightOptions
+    from pf_offboard.app.phases import Phase
+    from pf_offboard.app.rules import EndSpec
     from pf_offboard.app.demo import paper_config
     from pf_offboard.app.encoders import Encoder
     from pf_offboard.app.link import Link, parse_endpoint
@@ -100,9 +102,9 @@ async def _app(port: int, samples: int, in_app: list[float]) -> None:
     try:
         target = await link.wait_heartbeat(10.0)
         pipeline = Pipeline(follower, Encoder("acceleration", PX4, target.system, target.component))
-        options = BridgeOptions("airborne", math.nan, EndSpec(), setpoint_rate_hz=RATE_HZ, status=False)
+        options = FlightOptions("airborne", math.nan, EndSpec(), setpoint_rate_hz=RATE_HZ, status=False)
         path = follower.path
-        bridge = Bridge(link, PX4, pipeline, options, path.length_m, path.closed, path.lam_max, status_stream=io.StringIO())
+        bridge = Flight(link, PX4, pipeline, options, path.length_m, path.closed, path.lam_max, status_stream=io.StringIO())
         bridge.phase = Phase.FOLLOWING
         gc.freeze()  # as fly does before its loop
         done = asyncio.Event()

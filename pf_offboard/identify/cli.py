@@ -69,13 +69,13 @@ def run(args: argparse.Namespace) -> int:
             # at hover the position's own wander is most of what the correction adds: the real PX4
             # SIH's excitations fitted a drag of -0.35 / 0.11 with it, 0.40 / 0.44 without (docs/identify.md)
             raise InputError("--velocity-correction", "is for path-following logs, not the hover excitation --connect flies")
-        from pf_offboard.identify.excite import ExcitationSpec, excite
+        from pf_offboard.identify.excite import ExcitationSpec, ExciteRequest, excite
 
         spec = ExcitationSpec(
             duration_s=args.duration, amplitude_xy_m_s2=args.amplitude, amplitude_z_m_s2=0.8 * args.amplitude,
             box_m=args.box, max_speed_m_s=args.max_speed, max_tilt_deg=args.max_tilt, seed=args.seed,
         )  # fmt: skip
-        outcome = excite(args, spec, sys.stderr)
+        outcome = excite(ExciteRequest.from_args(args), spec, sys.stderr)
         if outcome.exit_code != 0 or outcome.tlog is None:
             return outcome.exit_code or 3
         if outcome.aborted:

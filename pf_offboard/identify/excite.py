@@ -2,7 +2,7 @@
 
 :class:`ExcitationFollower` stands in for the path follower (same ``update(position, velocity) ->
 Command`` / ``reset()`` interface), so ``fly``'s machinery — :class:`~pf_offboard.app.pipeline.Pipeline`,
-the encoders of every output mode, :class:`~pf_offboard.app.bridge.Bridge` (activation, keep-alive,
+the encoders of every output mode, :class:`~pf_offboard.app.flight.Flight` (activation, keep-alive,
 stale-state watchdog, take-over, hand-back), the ``.tlog`` / ``.csv`` logs — flies it unchanged.
 :func:`excite` is ``identify --connect``: it connects like ``fly``, flies the excitation, hands back in
 the hold mode and returns the log directory for :mod:`.cli` to fit.
@@ -281,63 +281,86 @@ class ExciteOutcome:
     aborted: str  # the limit that aborted the excitation ("" if none)
 
 
-def excite(args: argparse.Namespace, spec: ExcitationSpec, stream: TextIO) -> ExciteOutcome:
+@dataclass(frozen=True)
+class ExciteRequest:
+    """``identify --connect``'s flags, typed (built once from the command line)."""
+
+    connect: str
+    config_path: str
+    takeoff_m: float | None = None  # None: airborne
+    output: str | None = None
+    autopilot: str = "auto"
+    target_system: int | None = None
+    heartbeat_timeout_s: float = 10.0
+    set_guid_options: bool = False
+    log_dir: str | None = None
+    quiet: bool = False
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> ExciteRequest:
+        return cls(
+            connect=args.connect, config_path=str(args.config), takeoff_m=args.takeoff, output=args.output,
+            autopilot=args.autopilot, target_system=args.target_system, heartbeat_timeout_s=args.heartbeat_timeout,
+            set_guid_options=bool(args.set_guid_options), log_dir=args.log_dir, quiet=bool(args.quiet),
+        )  # fmt: skip
+
+
+def excite(args: argparse.Namespace | ExciteRequest, spec: ExcitationSpec, stream: TextIO) -> ExciteOutcome:
     """Connect, fly the excitation (``--airborne`` or ``--takeoff``), hand back; never hangs."""
     import asyncio
 
-    from pf_offboard.app.fly import flight_settings
+    from pf_offboard.app.fly import flight_settings_for
     from pf_offboard.app.link import parse_endpoint
     from pf_offboard.config import load_config
     from pf_offboard.errors import LinkError
 
-    endpoint = parse_endpoint(args.connect)
+    request = args if isinstance(args, ExciteRequest) else ExciteRequest.from_args(args)
+    endpoint = parse_endpoint(request.connect)
     endpoint.check_local()
-    config = load_config(args.config)
-    settings = flight_settings(config, argparse.Namespace(output=args.output, end_action=None))
-    if args.takeoff is not None and not (math.isfinite(args.takeoff) and 0.3 <= args.takeoff <= 100.0):
-        raise InputError("--takeoff", f"height must be in [0.3, 100] m, got {args.takeoff}")
-    if args.log_dir:
+    config = load_config(request.config_path)
+    settings = flight_settings_for(config, output=request.output)
+    if request.takeoff_m is not None and not (math.isfinite(request.takeoff_m) and 0.3 <= request.takeoff_m <= 100.0):
+        raise InputError("--takeoff", f"height must be in [0.3, 100] m, got {request.takeoff_m}")
+    if request.log_dir:
         from pf_offboard.logs._io import make_dir
 
-        make_dir(args.log_dir, "--log-dir")
+        make_dir(request.log_dir, "--log-dir")
     try:
-        return asyncio.run(_excite(args, endpoint, config, settings, spec, stream))
+        return asyncio.run(_excite(request, endpoint, config, settings, spec, stream))
     except LinkError as exc:
         print(f"pf-offboard identify: link error: {exc}", file=stream)
         return ExciteOutcome(3, str(exc), None, None, "")
 
 
-async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings: Any, spec: ExcitationSpec, stream: TextIO) -> ExciteOutcome:
+async def _excite(request: ExciteRequest, endpoint: Any, config: Any, settings: Any, spec: ExcitationSpec, stream: TextIO) -> ExciteOutcome:
     """``fly``'s set-up and bridge with the excitation follower (see pf_offboard.app.fly._fly)."""
     import asyncio
     import time
 
     from pymavlink.dialects.v20 import common as mavlink2
 
-    from pf_offboard.app.bridge import Bridge, BridgeOptions, EndSpec
+    from pf_offboard.app.dialects import dialect_for
     from pf_offboard.app.encoders import Encoder
     from pf_offboard.app.estimator import Estimator
-    from pf_offboard.app.fly import (
-        _check_guid_options,
-        default_log_dir,
-        read_setpoint_mapping,
-    )
+    from pf_offboard.app.flight import Flight, FlightOptions
+    from pf_offboard.app.fly import default_log_dir, prepare_output, run_flight
     from pf_offboard.app.link import Link
     from pf_offboard.app.pipeline import Pipeline
-    from pf_offboard.app.profiles import Autopilot, select_profile
-    from pf_offboard.errors import LinkError
+    from pf_offboard.app.profiles import select_profile
+    from pf_offboard.app.rules import EndSpec
     from pf_offboard.logs.flightlog import FlightLog
 
     link = Link.open(endpoint)
     log: FlightLog | None = None
     try:
-        target = await link.wait_heartbeat(args.heartbeat_timeout, args.target_system)
-        profile = select_profile(args.autopilot, target.autopilot)
+        target = await link.wait_heartbeat(request.heartbeat_timeout_s, request.target_system)
+        profile = select_profile(request.autopilot, target.autopilot)
+        dialect = dialect_for(profile)
         link.set_source_system(target.system)
-        log_dir = Path(args.log_dir) if args.log_dir else Path("flights")
+        log_dir = Path(request.log_dir) if request.log_dir else Path("flights")
         try:
-            log_dir = Path(args.log_dir) if args.log_dir else default_log_dir()
-            log = FlightLog.open(log_dir, name="identify", config_path=args.config)
+            log_dir = Path(request.log_dir) if request.log_dir else default_log_dir()
+            log = FlightLog.open(log_dir, name="identify", config_path=request.config_path)
         except OSError as exc:
             raise InputError("--log-dir", f"cannot write the logs in {log_dir}: {exc.strerror or exc}") from None
         flight_log = log
@@ -363,15 +386,15 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
 
         follower = ExcitationFollower(spec, vehicle_time, attitude=attitude)
         pipeline = Pipeline(follower, encoder, estimator)
-        launch = "takeoff" if args.takeoff is not None else "airborne"
-        options = BridgeOptions(
+        launch = "takeoff" if request.takeoff_m is not None else "airborne"
+        options = FlightOptions(
             launch=launch,
-            height_m=args.takeoff if args.takeoff is not None else math.nan,
+            height_m=request.takeoff_m if request.takeoff_m is not None else math.nan,
             end=EndSpec(duration_s=spec.total_s, open_path_end=False),
             end_action="hold",
             setpoint_rate_hz=settings.setpoint_rate_hz,
             state_timeout_s=settings.state_timeout_s,
-            status=not args.quiet,
+            status=not request.quiet,
         )
         bridge_box: list[Any] = []
 
@@ -380,7 +403,7 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
             if follower.abort_reason and bridge_box and step.record.mode == "following":
                 bridge_box[0].request_stop(f"excitation aborted: {follower.abort_reason}")
 
-        bridge = Bridge(link, profile, pipeline, options, 1.0, True, 1.0, on_step=on_step, status_stream=stream)
+        bridge = Flight(link, profile, pipeline, options, 1.0, True, 1.0, on_step=on_step, status_stream=stream, dialect=dialect)
         bridge_box.append(bridge)
         link.start_reading(bridge.on_message)
 
@@ -390,29 +413,15 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
                 (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, settings.setpoint_rate_hz),
                 (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0),
             ):
-                bridge.request_interval(msg_id, rate)
-            await read_setpoint_mapping(bridge, profile, settings, pipeline, stream)
-            if profile.autopilot is Autopilot.ARDUPILOT:
-                await _check_guid_options(bridge, profile.required_guid_options(settings.output_mode), args.set_guid_options, settings.output_mode)
+                bridge.commander.request_interval(msg_id, rate)
+            await prepare_output(bridge, dialect, settings, request.set_guid_options, stream, warnings=False)
 
         import signal
 
         loop = asyncio.get_running_loop()
         loop.add_signal_handler(signal.SIGINT, bridge.request_stop)  # Ctrl-C: hand back, as fly does
         try:
-            async with asyncio.TaskGroup() as tg:
-                flight = tg.create_task(bridge.fly(setup))
-                helpers = [tg.create_task(bridge.keepalive()), tg.create_task(bridge.heartbeat()), tg.create_task(bridge.status_line())]
-                result = await flight
-                for task in helpers:
-                    task.cancel()
-        except BaseExceptionGroup as group:
-            first: BaseException = group
-            while isinstance(first, BaseExceptionGroup):
-                first = first.exceptions[0]
-            if isinstance(first, (InputError, LinkError)):
-                raise first from None
-            raise
+            result = await run_flight(bridge, setup)
         finally:
             loop.remove_signal_handler(signal.SIGINT)
     finally:

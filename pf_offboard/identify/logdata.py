@@ -362,7 +362,7 @@ def load_log(
 def _tilts_from_gravity(raw: _Raw) -> bool:
     """Whether the logged autopilot tilted from g alone for acceleration setpoints: its
     ``accel_tilt_param`` as logged, else the profile's default (PX4's and ArduPilot's: yes)."""
-    from pf_offboard.app.bridge import param_value_decode
+    from pf_offboard.app.params import param_value_decode
     from pf_offboard.app.profiles import ARDUPILOT, PX4
 
     profile = PX4 if raw.autopilot == _MAV_AUTOPILOT_PX4 else ARDUPILOT

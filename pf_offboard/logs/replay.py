@@ -214,7 +214,7 @@ def _state_source_of(entries: Sequence[TlogEntry]) -> str:
 
 def _param_from_log(entries: Sequence[TlogEntry], param: str, profile: Any) -> float | None:
     """The last value the vehicle reported for ``param`` (PARAM_VALUE), or None."""
-    from pf_offboard.app.bridge import param_value_decode
+    from pf_offboard.app.params import param_value_decode
 
     value = None
     for e in entries:

@@ -1,6 +1,6 @@
 """Flight safety: the envelope monitor between the controller and the link (docs/app.md, "Safety").
 
-Pure: state samples and setpoints in, verdicts out. The bridge (:mod:`pf_offboard.app.bridge`)
+Pure: state samples and setpoints in, verdicts out. The flight's supervisor (:mod:`pf_offboard.app.supervisor`)
 only wires it to the link and acts on its verdicts.
 """
 

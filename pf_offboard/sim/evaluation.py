@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from pf_offboard.app.bridge import LapCounter
+from pf_offboard.app.rules import LapCounter
 from pf_offboard.config import load_config
 from pf_offboard.errors import InputError
 from pf_offboard.logs.steplog import StepRecord

@@ -312,7 +312,7 @@ class SimFlight:
     computed; :attr:`SimResult.records` is then unavailable). Sweeps fly thousands this way."""
 
     def __init__(self, config_path: str | Path, spec: SimSpec, out_dir: str | Path, write_logs: bool = True) -> None:
-        from pf_offboard.app.bridge import EndSpec, LapCounter, ThrowTrigger
+        from pf_offboard.app.rules import EndSpec, LapCounter, ThrowTrigger
         from pf_offboard.app.encoders import Encoder
         from pf_offboard.app.estimator import Estimator
         from pf_offboard.app.fly import flight_settings
@@ -443,7 +443,7 @@ class SimFlight:
     def _on_message(self, log: FlightLog, msg: Any) -> None:
         kind = msg.get_type()
         if kind == "PARAM_VALUE":
-            from pf_offboard.app.bridge import param_value_decode
+            from pf_offboard.app.params import param_value_decode
 
             pid = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
             pid = pid.rstrip("\x00")

@@ -6,7 +6,8 @@ import pytest
 
 import numpy as np
 
-from pf_offboard.app.bridge import EndSpec, LapCounter, TakeoffSettle, ThrowTrigger, end_reason, param_value_decode, param_value_encode
+from pf_offboard.app.params import param_value_decode, param_value_encode
+from pf_offboard.app.rules import EndSpec, LapCounter, TakeoffSettle, ThrowTrigger, end_reason
 from pf_offboard.errors import InputError
 
 
@@ -126,7 +127,8 @@ def test_status_line_shows_mode_and_transverse_state() -> None:
     import io
     from types import SimpleNamespace
 
-    from pf_offboard.app.bridge import Bridge, BridgeOptions
+    from pf_offboard.app.flight import Flight as Bridge
+    from pf_offboard.app.flight import FlightOptions as BridgeOptions
     from pf_offboard.app.encoders import Encoder
     from pf_offboard.app.pipeline import Pipeline
     from pf_offboard.app.profiles import PX4

@@ -14,7 +14,9 @@ from pymavlink.dialects.v20 import common as mavlink2
 from sitl_mock.config import MockConfig, SpawnSpec
 from sitl_mock.runner import run_in_thread
 
-from pf_offboard.app.bridge import Bridge, BridgeOptions, EndSpec
+from pf_offboard.app.flight import Flight as Bridge
+from pf_offboard.app.flight import FlightOptions as BridgeOptions
+from pf_offboard.app.rules import EndSpec
 from pf_offboard.app.encoders import Encoder
 from pf_offboard.app.estimator import Estimator
 from pf_offboard.app.fly import fly
@@ -65,11 +67,11 @@ def test_takeoff_heading_waits_for_an_attitude_sample() -> None:
         bridge.on_message(local_position(10))  # position first: no attitude yet
         # wake the waiter as any event would and let it look (it clears the event to wait again):
         # a condition, not a wall-clock pause
-        bridge._changed.set()
+        bridge.waiter.changed.set()
         deadline = asyncio.get_running_loop().time() + 5.0
-        while bridge._changed.is_set() and not task.done() and asyncio.get_running_loop().time() < deadline:
+        while bridge.waiter.changed.is_set() and not task.done() and asyncio.get_running_loop().time() < deadline:
             await asyncio.sleep(0)
-        assert not bridge._changed.is_set()  # it looked at the position-only state ...
+        assert not bridge.waiter.changed.is_set()  # it looked at the position-only state ...
         assert not task.done()  # ... and still waits for the attitude
         bridge.on_message(attitude_quaternion(12, q_ned_frd=tuple(north)))
         bridge.on_message(local_position(20))

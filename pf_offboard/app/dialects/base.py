@@ -1,0 +1,94 @@
+"""What every autopilot dialect provides, and what is the same on all of them.
+
+A dialect is one autopilot family's way of doing things the shared code must not branch on:
+its modes and their names (its :class:`~pf_offboard.app.profiles.Profile`), its take-off
+sequence, the parameters each output mode needs read or set, and how a take-off may be held
+while safing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from pf_offboard.app.params import Parameters
+from pf_offboard.app.profiles import Profile, output_mode_refusal
+from pf_offboard.errors import LinkError
+
+class TakeoffOps(Protocol):
+    """The flight's operations a dialect's take-off sequence is made of."""
+
+    def hold_here(self) -> None:
+        """Enter the take-off phase streaming a position hold at the current position."""
+
+    def send_nothing(self) -> None:
+        """Enter the take-off phase streaming nothing."""
+
+    async def proof_of_life(self) -> None:
+        """Wait until a few setpoints went out."""
+
+    async def engage_and_arm(self) -> None:
+        """Switch to OFFBOARD / GUIDED and arm (confirmed, within the readiness deadline)."""
+
+    def climb_to(self, height_m: float) -> None:
+        """Move the streamed position hold up to ``height_m`` above home."""
+
+    def command(self, command: int, *params: float) -> None:
+        """Send one COMMAND_LONG (not waited for)."""
+
+class Dialect:
+    """Shared behaviour; subclasses set :attr:`profile` and the take-off sequence."""
+
+    profile: Profile
+    # while taking off, a position hold may be streamed (and is the safe setpoint when safing)
+    takeoff_streams_setpoints: bool = True
+
+    @property
+    def name(self) -> str:
+        return self.profile.name
+
+    def output_refusal(self, output_mode: str) -> str:
+        """Why this output mode is refused by default on this autopilot ("" if it is not)."""
+        return output_mode_refusal(self.profile, output_mode)
+
+    async def take_off(self, ops: TakeoffOps, height_m: float) -> None:
+        raise NotImplementedError
+
+    async def read_setpoint_mapping(
+        self, params: Parameters, output_mode: str, hover_thrust: float | None, encoder: Any, warn: Callable[[str], None]
+    ) -> Any:
+        """What the encoder needs to know of the autopilot's setpoint mapping; returns the encoder
+        to fly with.
+
+        attitude / rates: the hover thrust (unless the config gives one); a value no vehicle hovers
+        at is a link error. acceleration: whether the autopilot tilts from g alone
+        (:attr:`Profile.accel_tilt_param`, PX4's MPC_ACC_DECOUPLE); without an answer the profile's
+        default (PX4's own default) is kept and a warning says so.
+        """
+        profile = self.profile
+        if output_mode != "acceleration":
+            if hover_thrust is None:
+                hover = await params.read(profile.hover_thrust_param)
+                if not 0.05 <= hover <= 0.95:
+                    raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
+                return encoder.with_hover_thrust(float(hover))
+            return encoder
+        if profile.accel_tilt_param is None:
+            return encoder
+        try:
+            value = await params.read(profile.accel_tilt_param)
+        except LinkError as exc:
+            default = "1 (tilt from g alone)" if profile.accel_tilt_from_gravity else "0"
+            warn(f"pf-offboard: warning: {exc}; assuming {profile.accel_tilt_param} = {default}, the autopilot's default")
+            return encoder
+        if value not in (0.0, 1.0):
+            raise LinkError(f"{profile.accel_tilt_param} = {value:g} is neither 0 nor 1")
+        return encoder.with_tilt_from_gravity(profile.tilts_from_gravity(value))
+
+    async def ensure_output_requirements(self, params: Parameters, output_mode: str, allow_set: bool) -> None:
+        """Make sure the autopilot's parameters let it fly ``output_mode`` as we mean it, or refuse."""
+
+    async def output_warnings(self, params: Parameters, output_mode: str) -> list[str]:
+        """Warnings about how this autopilot will fly ``output_mode`` (parameters read)."""
+        return []
+
