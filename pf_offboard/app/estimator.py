@@ -323,8 +323,8 @@ class Estimator:
         return True
 
     def _reset(self, reason: str, jump_ned_m: NDArray[np.float64] | None = None) -> None:
-        if jump_ned_m is not None:
-            self.last_reset_enu_m = frames.ned_to_enu(jump_ned_m)
+        # None: a reset of unknown size (a clock re-anchoring): no size to judge it by
+        self.last_reset_enu_m = frames.ned_to_enu(jump_ned_m) if jump_ned_m is not None else None
         self._vc_skip = True  # the position jumped: this sample's Δposition is not a velocity
         self.reset_pending = True
         self.reset_reason = reason

@@ -36,6 +36,7 @@ from pf_offboard.app.params import Parameters
 from pf_offboard.app.phases import (
     EXIT_BREACH,
     EXIT_CRASH,
+    EXIT_FAILSAFE,
     EXIT_INTERRUPTED,
     EXIT_LINK,
     EXIT_OK,
@@ -106,7 +107,7 @@ class Flight:
         self.phase = Phase.PREFLIGHT
         self.display = StatusDisplay(status_stream if status_stream is not None else sys.stderr, options.status, clock)
         self.waiter = Waiter(clock, lambda: self.phase in INTERRUPTING)
-        self.modes = ModeWatch(profile)
+        self.modes = ModeWatch(profile, clock)
         self.commander = Commander(
             link, self.modes, self.waiter, CommandTiming(options.command_timeout_s, options.progress_every_s),
             self.display.say, self.display.note, lambda: self.phase is Phase.TAKEN_OVER,
@@ -227,8 +228,14 @@ class Flight:
             if not self.modes.armed:
                 raise LinkError("--airborne: the vehicle is not armed (is it flying?)")
             if not self._neutral_allowed():
-                # already in OFFBOARD / GUIDED: whatever we send flies at once, so engage now
-                self._engage("activated (airborne, already in " + self.profile.offboard.name + ")")
+                # Already in OFFBOARD / GUIDED, and not by our request: another controller (a second
+                # pf-offboard, a GCS script) may be flying it. Two controllers fight (13.5 s seen,
+                # undetected): refuse, sending nothing.
+                self.phase = Phase.TAKEN_OVER
+                self._last_setpoint = None
+                self._finish(EXIT_TAKEOVER, f"the vehicle is already in {self.profile.offboard.name}, which we did not start: another "
+                                            f"controller may be flying it; nothing sent (switch it to {self.profile.hold.name} first)")  # fmt: skip
+                return
             else:
                 # stream the follower's setpoints (proof of life), then switch
                 self.phase = Phase.WAITING
@@ -399,10 +406,14 @@ class Flight:
         old = self.profile.mode_name(modes.previous_mode) if modes.previous_mode is not None else "?"
         new = self.profile.mode_name(msg.custom_mode)
         if change is ModeChange.FAILSAFE:
-            # the autopilot's own failsafe (e.g. PX4 offboard loss -> RTL), not an operator: ask for
-            # our safe mode instead (an RTL climbs to tens of metres)
-            if phase is not Phase.SAFING:
-                self._enter_safing(EXIT_LINK, f"autopilot failsafe: mode {old} -> {new}")
+            # The autopilot's own failsafe (a critical battery's LAND, a return, any mode with system
+            # status CRITICAL / EMERGENCY) wins, like the operator: we stop commanding at once and
+            # never ask for a mode over it (a hold requested over a battery LAND kept the vehicle up).
+            self._last_setpoint = None
+            self._safe_msg = None
+            self.phase = Phase.FAILED
+            self._finish(EXIT_FAILSAFE, f"the autopilot's failsafe took over during {phase.value}: mode {old} -> {new} "
+                                        f"(system status {msg.system_status}); stopped commanding, not overriding it")  # fmt: skip
             return
         # The operator (RC / ground station) took over: yield at once, never re-engage, in any phase.
         self.phase = Phase.TAKEN_OVER

@@ -94,6 +94,7 @@ class ModeTracker:
         self.confirmed: Request | None = None
         self.unresolved: dict[int, float] = {}  # earlier requests of ours that may still land: mode -> last sent
         self.start_mode: int | None = None  # the mode the vehicle was in when we first asked
+        self.asked: set[int] = set()  # every mode we asked for (a HEARTBEAT still showing one is ours)
         self.last: Seen | None = None
         self.owner = Owner.NOBODY
         self.reason = ""  # why we yielded / what was refused
@@ -115,7 +116,7 @@ class ModeTracker:
 
     def is_ours(self, mode: int) -> bool:
         """A mode we asked for (pending, confirmed, unresolved) or started from."""
-        modes = [self.start_mode, *self.unresolved]
+        modes = [self.start_mode, *self.unresolved, *self.asked]
         if self.pending is not None:
             modes.append(self.pending.mode)
         if self.confirmed is not None:
@@ -138,6 +139,7 @@ class ModeTracker:
         if self.owner is Owner.NOBODY:
             self.owner = Owner.US
             self.start_mode = self.last.mode if self.last is not None else None
+        self.asked.add(mode)
         p = self.pending
         if p is not None and self._same(p.mode, mode):
             self.pending = replace(p, last_sent_s=now_s, sends=p.sends + 1)
@@ -186,7 +188,7 @@ class ModeTracker:
     def _failsafe(self, seen: Seen) -> bool:
         asked = self.pending is not None and self._same(seen.mode, self.pending.mode)
         asked = asked or (self.confirmed is not None and self._same(seen.mode, self.confirmed.mode))
-        asked = asked or any(self._same(seen.mode, m) for m in self.unresolved)
+        asked = asked or any(self._same(seen.mode, m) for m in (*self.unresolved, *self.asked))
         if asked:
             return False
         if seen.system_status in (MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY) and not (
