@@ -630,6 +630,8 @@ class Autopilot:
         table = self.streams.get(link)
         if table is None or msgid not in telemetry.BUILDERS:
             return UNSUPPORTED
+        if msgid == mavlink.MAVLINK_MSG_ID_HEARTBEAT and self.config.faults.heartbeat_rate_fixed:
+            return DENIED
         if interval_us == -1:
             table.set_interval(msgid, math.inf, self.time_s)
         elif interval_us == 0:

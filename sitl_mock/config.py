@@ -162,6 +162,8 @@ class FaultConfig:
     # every DO_SET_MODE answered is followed by a DENIED COMMAND_ACK addressed to another GCS
     # (target system 255, component 190): what a client sees when someone else's request is refused
     foreign_denied_ack: bool = False
+    # SET_MESSAGE_INTERVAL for HEARTBEAT refused (DENIED), as real PX4 does: HEARTBEAT stays at 1 Hz
+    heartbeat_rate_fixed: bool = False
     # from estimate_lost_at_s the position estimate is lost: ODOMETRY quality -1, ESTIMATOR_STATUS /
     # EKF_STATUS_REPORT (2 Hz) without a position solution, and the estimate drifts at
     # estimate_lost_drift_ned_m_s (a vehicle flown on it drifts the other way)

@@ -62,6 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="--takeoff/--airborne: wait up to S seconds for the position estimate and arming checks (default 120)")  # fmt: skip
     parser.add_argument("--takeoff-timeout", type=float, metavar="S",
                         help="--takeoff: give up if the take-off altitude is not held within S seconds (default 30 + 5 s per metre)")  # fmt: skip
+    parser.add_argument("--offboard-loss", choices=("check", "hold", "land"), default="check",
+                        help="what the vehicle does if the app dies: check (read and report it, refuse if the motors would "
+                             "stop), or set it to hold / land where the autopilot allows (PX4 COM_OBL_RC_ACT); see docs/safety.md")  # fmt: skip
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/<UTC timestamp>/")
     parser.add_argument("--quiet", action="store_true", help="no status line")
     parser.add_argument("--json", action="store_true", help="print the flight report (as in LOG_DIR/summary.json) as JSON on stdout")
@@ -274,6 +277,7 @@ class FlyRequest:
     log_dir: str | None = None
     quiet: bool = False
     json: bool = False
+    offboard_loss: str | None = None  # None: check only; "hold" / "land": set the autopilot's action
 
 
 def request_from_args(args: argparse.Namespace, config: Any) -> FlyRequest:
@@ -291,6 +295,7 @@ def request_from_args(args: argparse.Namespace, config: Any) -> FlyRequest:
         experimental_output=bool(getattr(args, "experimental_output", False)),
         ready_timeout_s=getattr(args, "ready_timeout", 120.0), takeoff_timeout_s=getattr(args, "takeoff_timeout", None),
         log_dir=args.log_dir, quiet=bool(args.quiet), json=bool(getattr(args, "json", False)),
+        offboard_loss=None if getattr(args, "offboard_loss", "check") == "check" else args.offboard_loss,
     )  # fmt: skip
 
 
@@ -450,6 +455,7 @@ async def _fly(
                 for msg_id, rate, _name in requests:
                     flight.commander.request_interval(msg_id, rate)
             await prepare_output(flight, dialect, settings, request.set_guid_options, stream, warnings=True)
+            await check_offboard_loss(flight, dialect, settings.output_mode, request.offboard_loss, stream)
 
         loop = asyncio.get_running_loop()
         # SIGTERM (systemd, docker stop) and SIGHUP (the terminal closed) end the flight like Ctrl-C:
@@ -510,6 +516,27 @@ async def prepare_output(flight: Any, dialect: Any, settings: FlightSettings, al
     if warnings:
         for line in await dialect.output_warnings(flight.params, settings.output_mode):
             print(f"pf-offboard fly: warning: {line}", file=stream)
+
+
+async def check_offboard_loss(flight: Any, dialect: Any, output_mode: str, wanted: str | None, stream: TextIO) -> None:
+    """What the vehicle does if the app dies, read (and with ``wanted`` set) before any mode request:
+    one line saying it; refused (exit 2) when the motors would stop; a warning when nothing would
+    hold the vehicle's position (PX4's Return climbs to RTL_RETURN_ALT; ArduPilot attitude / rates
+    drift)."""
+    try:
+        loss = await dialect.offboard_loss(flight.params, output_mode, wanted)
+    except LinkError as exc:
+        if wanted is not None:
+            raise
+        print(f"pf-offboard fly: warning: cannot read what the vehicle does if the app stops ({exc}); see docs/safety.md", file=stream)
+        return
+    if loss.falls:
+        raise InputError("--offboard-loss", f"if the app stopped, {loss.text}; set it to hold or land (--offboard-loss hold)")
+    if loss.drifts:
+        hint = " (--offboard-loss hold sets a hold)" if wanted is None and dialect.name == "px4" else ""
+        print(f"pf-offboard fly: warning: if the app stops, {loss.text}{hint}", file=stream)
+    else:
+        print(f"pf-offboard fly: if the app stops, {loss.text}", file=stream)
 
 
 def _write_summary_json(as_json: bool, code: int, reason: str, summary: Any, log_dir: Path, config: Any) -> None:
