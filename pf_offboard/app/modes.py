@@ -5,16 +5,17 @@ bridge sends; this module decides.
 
 Rules:
 
-- A request is *pending* from the moment it is sent until a HEARTBEAT **received after it was sent**
-  shows the mode (evidence older than the request never counts: a HEARTBEAT still showing the old
-  hold while an OFFBOARD request is in flight is not a confirmed hold). A pending request is due to
-  be re-sent every ``retry_s`` until confirmed.
+- A request is *pending* from the moment it is sent until a HEARTBEAT **received at least
+  ``settle_s`` after it was first sent** shows the mode (evidence older than the request never
+  counts: a HEARTBEAT still showing the old hold while an OFFBOARD request is in flight is not a
+  confirmed hold; ``settle_s``, 0.5 s, exceeds the link's round trip, so the HEARTBEAT was also
+  *emitted* after the autopilot handled the request). A pending request is due to be re-sent
+  every ``retry_s`` until confirmed.
 - A request for another mode while one is pending leaves the earlier one *unresolved* (it may still
-  land: the autopilot handles commands in order). While any is unresolved, a confirmation must
-  also come from a HEARTBEAT received ``settle_s`` after the new request was first sent (by then
-  the autopilot has handled the earlier one too); a HEARTBEAT showing an unresolved mode meanwhile
-  (our earlier request landing) is ours, not a takeover, and the newer request stays pending and
-  re-sent. Modes we asked for are never someone else's.
+  land: the autopilot handles commands in order, so by ``settle_s`` after the newer request it has
+  handled the earlier one too); a HEARTBEAT showing an unresolved mode meanwhile (our earlier
+  request landing) is ours, not a takeover, and the newer request stays pending and re-sent.
+  Modes we asked for are never someone else's.
 - The autopilot's failsafe wins: a HEARTBEAT with system_status CRITICAL / EMERGENCY in a mode we
   did not ask for, or any failsafe mode (LAND, RTL ...) we did not ask for, makes the tracker
   *yield*: no mode is ever requested again. So does an operator's mode (any other mode we did not
@@ -175,7 +176,7 @@ class ModeTracker:
             return Event.OPERATOR
         p = self.pending
         if p is not None and self._same(mode, p.mode):
-            if now_s > p.first_sent_s and (not self.unresolved or now_s >= p.first_sent_s + self.settle_s):
+            if now_s > p.first_sent_s and now_s >= p.first_sent_s + self.settle_s:
                 # newer than the request (and, with earlier requests in flight, late enough that the
                 # autopilot, handling commands in order, has handled them too): confirmed
                 self.confirmed, self.pending = p, None

@@ -37,7 +37,8 @@ def test_the_autopilot_failsafe_and_the_operator_win() -> None:
     t = tracker()
     t.on_heartbeat(LOITER, ACTIVE, 0.0)
     t.request(OFFBOARD, 0.1)
-    assert t.on_heartbeat(OFFBOARD, ACTIVE, 0.2) is Event.CONFIRMED
+    assert t.on_heartbeat(OFFBOARD, ACTIVE, 0.2) is Event.NONE  # too soon: may have left before the request landed
+    assert t.on_heartbeat(OFFBOARD, ACTIVE, 0.7) is Event.CONFIRMED
     assert t.on_heartbeat(LAND, MAV_STATE_CRITICAL, 5.0) is Event.FAILSAFE
     assert t.owner is Owner.AUTOPILOT and not t.request(LOITER, 5.01) and "failsafe" in t.may_request()
     t2 = tracker()
@@ -51,7 +52,7 @@ def test_the_autopilot_failsafe_and_the_operator_win() -> None:
     t4 = tracker()  # LAND we asked for is ours
     t4.on_heartbeat(OFFBOARD, ACTIVE, 0.0)
     t4.request(LAND, 0.1)
-    assert t4.on_heartbeat(LAND, MAV_STATE_CRITICAL, 0.2) is Event.CONFIRMED
+    assert t4.on_heartbeat(LAND, MAV_STATE_CRITICAL, 0.7) is Event.CONFIRMED
 
 
 def test_foreign_and_refusing_acks() -> None:

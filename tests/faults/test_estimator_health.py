@@ -4,6 +4,8 @@ drifting) is never flown on."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from sitl_mock.config import FaultConfig
@@ -16,6 +18,7 @@ from pf_offboard.config import load_config
 from pf_offboard.frames import ned_to_enu
 
 from .attackers import fly_udpin, mock_config
+from .common import read_truth
 
 pytestmark = pytest.mark.integration
 
@@ -65,3 +68,26 @@ def test_a_lost_estimate_is_not_flown(tmp_path) -> None:
         assert est.rejected_unhealthy > 0
         last = [r for r in outcome.records if r.active][-1]
         assert last.time_s < 3.5  # nothing flown long after the loss
+
+
+def test_a_vertical_estimator_reset_never_takes_the_vehicle_below_the_floor(tmp_path) -> None:
+    """At 3 s the altitude estimate jumps 1.6 m up (the vehicle does not move). Followed, the app
+    flew the real vehicle 1.6 m down: 0.03 m above the ground at path speed, exit 0. Now the reset
+    (confirmed by the next sample) ends following on that sample: hold confirmed, exit 5, and the
+    true altitude never drops below the fence floor."""
+    app_port = free_udp_port()
+    config = write_config(tmp_path)
+    fence = envelope_fence(load_config(config))
+    truth_log = tmp_path / "truth.csv"
+    cfg = dataclasses.replace(mock_config(app_port, faults=FaultConfig(estimator_reset_at_s=3.0, estimator_reset_ned_m=(0.0, 0.0, -1.6))),
+                              truth_log=str(truth_log))  # fmt: skip
+    with run_in_thread(cfg) as mock:
+        outcome, printed = fly_udpin(app_port, config, tmp_path / "log", "--airborne", "--duration", "8")
+        mode, armed, _, events = _end(mock)
+    truth = read_truth(truth_log)
+    lowest = float(-truth.position_ned_m[:, 2].max())
+    print(f"\n1.6 m vertical reset: exit {outcome.exit_code}, {outcome.reason}; lowest true altitude {lowest:.2f} m (floor {fence.floor_m:g} m)")
+    assert outcome.exit_code == 5, printed
+    assert "estimator reset moved the position estimate 1.60 m (vertical +1.60 m" in outcome.reason
+    assert "AUTO.LOITER requested, confirmed" in outcome.reason and (mode, armed) == ("AUTO.LOITER", True)
+    assert lowest > fence.floor_m
