@@ -674,7 +674,8 @@ class Autopilot:
             self.px4_target = None
             self.guided.hold(pos, vel, yaw)
         elif spec.behaviour is Behaviour.LAND:
-            self.auto_target = np.array([pos[0], pos[1], pos[2]])
+            # brake to the stopping point, then descend there (as PX4 / ArduPilot LAND do from speed)
+            self.auto_target = np.array([self.hold_position[0], self.hold_position[1], pos[2]])
         elif spec.behaviour is Behaviour.RTL:
             self.auto_phase = "climb"
             self.auto_target = self.hold_position.copy()

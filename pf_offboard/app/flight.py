@@ -213,8 +213,20 @@ class Flight:
     def _end_mode(self) -> ModeRequest:
         return self.profile.land if self.options.end_action == "land" else self.profile.hold
 
+    def _refuse_foreign_offboard(self) -> None:
+        """Already in OFFBOARD / GUIDED, and not by our request: another controller (a second
+        pf-offboard, a GCS script) may be flying it. Two controllers fight (13.5 s seen, undetected):
+        refuse, sending nothing."""
+        self.phase = Phase.TAKEN_OVER
+        self._last_setpoint = None
+        self._finish(EXIT_TAKEOVER, f"the vehicle is already in {self.profile.offboard.name}, which we did not start: another "
+                                    f"controller may be flying it; nothing sent (switch it to {self.profile.hold.name} first)")  # fmt: skip
+
     async def _launch(self) -> None:
         opts = self.options
+        if opts.launch == "airborne" and self.modes.custom_mode is not None and not self._neutral_allowed():
+            self._refuse_foreign_offboard()  # before waiting for anything: nothing of ours may fly
+            return
         ready_deadline = self.clock() + opts.ready_timeout_s
         # the take-off heading comes from the attitude: wait for an attitude sample too
         est = await self._first_state(ready_deadline, need_attitude=opts.launch == "takeoff")
@@ -228,13 +240,7 @@ class Flight:
             if not self.modes.armed:
                 raise LinkError("--airborne: the vehicle is not armed (is it flying?)")
             if not self._neutral_allowed():
-                # Already in OFFBOARD / GUIDED, and not by our request: another controller (a second
-                # pf-offboard, a GCS script) may be flying it. Two controllers fight (13.5 s seen,
-                # undetected): refuse, sending nothing.
-                self.phase = Phase.TAKEN_OVER
-                self._last_setpoint = None
-                self._finish(EXIT_TAKEOVER, f"the vehicle is already in {self.profile.offboard.name}, which we did not start: another "
-                                            f"controller may be flying it; nothing sent (switch it to {self.profile.hold.name} first)")  # fmt: skip
+                self._refuse_foreign_offboard()
                 return
             else:
                 # stream the follower's setpoints (proof of life), then switch

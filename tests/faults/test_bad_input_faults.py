@@ -25,7 +25,7 @@ def test_bad_input_sends_nothing(tmp_path, capsys) -> None:
     good = f"udpin:127.0.0.1:{app_port}"
     cases = [
         ("udpout:256.1.1.1:14540", config, None, "is not an IPv4 address"),
-        (good, "/dev/zero", None, "a character device, not a regular file"),
+        (good, "/dev/zero", None, "/dev/zero"),
         (good, "c" * 5000, None, "File name too long"),
         (good, config, str(fifo), "not a regular file"),
         ("serial:/dev/zero:57600", config, None, "not a serial port"),
