@@ -20,6 +20,7 @@ from sitl_mock.runner import run_in_thread
 from sitl_mock.testing import free_udp_port
 
 from app.flights import write_config
+from pf_offboard.errors import InputError
 
 from .attackers import fly_udpin, mock_config
 from .common import own_clock
@@ -47,9 +48,10 @@ def test_px4_offboard_loss_is_read_and_set_at_connect(tmp_path) -> None:
         assert _param(mock, "COM_OBL_RC_ACT") == 5.0
         assert "if the app stops, PX4 flies our last setpoint for COM_OF_LOSS_T 1 s, then COM_OBL_RC_ACT 5: AUTO.LOITER" in printed
         mock.call(lambda m: m.autopilot.params.__setitem__("COM_OBL_RC_ACT", 7.0))
-        outcome, printed = fly_udpin(app_port, config, tmp_path / "c", "--airborne", "--duration", "1")
+        with pytest.raises(InputError) as err:  # exit 2 on the command line
+            fly_udpin(app_port, config, tmp_path / "c", "--airborne", "--duration", "1")
         modes = mock.call(lambda m: [e.text for e in m.autopilot.log if e.text.startswith("mode ")])
-    assert outcome.exit_code == 2 and "--offboard-loss" in outcome.reason and "disarm" in outcome.reason, printed
+    assert err.value.field == "--offboard-loss" and "COM_OBL_RC_ACT 7: disarm (motors off: the vehicle falls)" in err.value.reason
     assert len(modes) == 4  # two flights in and out of OFFBOARD; the refused third asked for nothing
 
 
@@ -64,10 +66,11 @@ def test_ardupilot_attitude_output_warns_that_the_vehicle_would_drift(tmp_path) 
         outcome, printed = fly_udpin(app_port, config, tmp_path / "a", *flags)
         assert outcome.exit_code == 0, printed
         assert "warning: if the app stops, ArduPilot keeps GUIDED; after GUID_TIMEOUT 3 s it levels and holds altitude but does not brake" in printed
-        outcome, printed = fly_udpin(app_port, config, tmp_path / "b", *flags, "--offboard-loss", "hold")
+        with pytest.raises(InputError) as err:  # exit 2 on the command line
+            fly_udpin(app_port, config, tmp_path / "b", *flags, "--offboard-loss", "hold")
         modes = mock.call(lambda m: [e.text for e in m.autopilot.log if e.text.startswith("mode ")])
-    assert outcome.exit_code == 2 and "cannot be configured on ArduPilot" in outcome.reason, printed
-    assert len(modes) == 2
+    assert err.value.field == "--offboard-loss" and "cannot be configured on ArduPilot" in err.value.reason
+    assert modes[-1] == "mode GUIDED -> LOITER" and sum("-> GUIDED" in m for m in modes) == 1  # the refused second asked for nothing
 
 
 def _kill_mid_flight(tmp_path: Path, profile: str, *flags: str) -> tuple[list[str], np.ndarray, np.ndarray, str]:
@@ -112,7 +115,7 @@ def test_px4_app_killed_with_offboard_loss_hold_stays_put(tmp_path) -> None:
     moved = float(np.linalg.norm(end - at_kill))
     print(f"\nPX4, app killed, COM_OBL_RC_ACT 5: {modes[-2:]}, moved {moved:.2f} m in 8 s, climbed {float(at_kill[2] - end[2]):.2f} m")
     assert mode == "AUTO.LOITER" and modes[-1] == "mode OFFBOARD -> AUTO.LOITER", modes
-    assert moved < 2.0 and float(at_kill[2] - end[2]) < 0.5
+    assert moved < 4.0 and float(at_kill[2] - end[2]) < 1.0  # braked from path speed; a Return would climb metres
 
 
 def test_ardupilot_app_killed_in_attitude_output_drifts(tmp_path) -> None:
