@@ -54,7 +54,7 @@ class SafetyConfig:
     max_attitude_error_deg: float = 35.0  # rates mode: measured vs commanded thrust axis (own loop diverging) ...
     attitude_error_time_s: float = 0.5  # ... for longer than this (a step demand at activation is transient)
     max_descent_speed_m_s: float = 5.0  # falling faster than this while following: motors lost / crash ...
-    falling_confirm_s: float = 0.1  # ... on every sample for at least this long (never one sample)
+    falling_confirm_s: float = 0.02  # ... on every sample for at least this long, two samples or more (never one)
     max_estimator_reset_m: float = 0.5  # an estimator reset (position jump) larger than this while following ends it
     no_progress_s: float = 5.0  # while following: neither along-path progress nor approach for this long
     min_progress_m: float = 0.5

@@ -83,14 +83,17 @@ def test_state_inside_the_envelope_is_ok_and_each_limit_breaches() -> None:
 
 def test_falling_is_never_decided_on_one_sample() -> None:
     """One sample claiming 50 m/s down is no verdict; descending beyond the limit on every sample
-    for safety.falling_confirm_s is; a good sample in between starts the count again."""
+    for safety.falling_confirm_s (two samples at least) is; a good sample in between starts again."""
     m = monitor()
     assert not m.check_state(sample(t=0.0, vel=(0.0, 0.0, -50.0))).breach
     assert not m.check_state(sample(t=0.004)).breach
     assert not m.check_state(sample(t=0.008, vel=(0.0, 0.0, -5.5))).breach
-    assert not m.check_state(sample(t=0.1, vel=(0.0, 0.0, -5.5))).breach  # 0.092 s
-    verdict = m.check_state(sample(t=0.11, vel=(0.0, 0.0, -5.5)))
-    assert verdict.kind is Breach.FALLING and verdict.crash and "for 0.10 s" in verdict.reason
+    assert not m.check_state(sample(t=0.02, vel=(0.0, 0.0, -5.5))).breach  # 0.012 s
+    verdict = m.check_state(sample(t=0.03, vel=(0.0, 0.0, -5.5)))
+    assert verdict.kind is Breach.FALLING and verdict.crash and "for 0.02 s" in verdict.reason
+    slow = monitor(falling_confirm_s=0.5)  # one sample 0.6 s after the first is still two samples
+    assert not slow.check_state(sample(t=0.0, vel=(0.0, 0.0, -6.0))).breach
+    assert slow.check_state(sample(t=0.6, vel=(0.0, 0.0, -6.0))).kind is Breach.FALLING
 
 
 def test_estimator_resets_and_degraded_estimates_end_following() -> None:
