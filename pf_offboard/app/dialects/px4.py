@@ -12,7 +12,7 @@ from pf_offboard.app.profiles import PX4
 # the RC-mode actions 0-2 fall back to Return, as observed on PX4 SITL)
 _LOSS_ACTIONS = {0: "AUTO.RTL (no RC: position mode falls back to Return, climbing to RTL_RETURN_ALT)",
                  1: "AUTO.RTL (no RC: altitude mode falls back to Return, climbing to RTL_RETURN_ALT)",
-                 2: "AUTO.RTL (no RC: manual falls back to Return, climbing to RTL_RETURN_ALT)",
+                 2: "AUTO.RTL (no RC: stabilized falls back to Return, climbing to RTL_RETURN_ALT)",
                  3: "AUTO.RTL (Return: climbs to RTL_RETURN_ALT, flies home, lands)", 4: "AUTO.LAND", 5: "AUTO.LOITER (holds position)",
                  6: "flight termination (motors off: the vehicle falls)", 7: "disarm (motors off: the vehicle falls)"}  # fmt: skip
 _WANTED = {"hold": 5, "land": 4}
