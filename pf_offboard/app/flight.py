@@ -658,6 +658,9 @@ class Flight:
                     continue
             if phase in (Phase.FOLLOWING, Phase.ENGAGING):
                 why = self.supervisor.stale_state(now - self._last_fresh_wall, self.options.state_timeout_s)
+                estimator = self.pipeline.estimator
+                if why and (estimator.health_reason or "quality -1" in estimator.last_event):
+                    why += f" (the estimate is refused: {estimator.health_reason or estimator.last_event})"
                 if why:
                     self._enter_safing(EXIT_LINK, why)
                     continue

@@ -61,6 +61,7 @@ def test_a_lost_estimate_is_not_flown(tmp_path) -> None:
         print(f"\nestimate lost ({source}): exit {outcome.exit_code}, {outcome.reason}; vehicle {mode} at {position_enu.round(2)}")
         assert outcome.exit_code == 3, printed
         assert "AUTO.LOITER requested, confirmed" in outcome.reason, outcome.reason
+        assert "the estimate is refused: " in outcome.reason  # says why the state went stale
         assert (mode, armed) == ("AUTO.LOITER", True)
         assert not any("RTL" in e for e in events), events
         assert fence.violation(position_enu) == "", position_enu
