@@ -12,6 +12,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from pf_offboard.errors import InputError
 
@@ -30,12 +31,25 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
 )
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``--help`` shows the usage): bad input is one line, exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {_clip(message)} (--help for usage)\n")
+
+
+def _clip(text: str, limit: int = 400) -> str:
+    """A message for one line: no line breaks, a 5000-character argument cut in the middle."""
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else f"{text[: limit // 2]} ... {text[-limit // 2 :]}"
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser; only ``command``'s module is imported (None: every command's, e.g. for docs),
     so ``pf-offboard --help`` / ``--version`` import nothing heavy (measured in ``bench``)."""
     from pf_offboard import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="pf-offboard",
         description="Time-invariant quadrotor path following (Kumar & Gill) over MAVLink.",
     )
@@ -51,14 +65,25 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    first = next((a for a in argv if not a.startswith("-")), "")
+    raw = list(sys.argv[1:] if argv is None else argv)
+    first = next((a for a in raw if not a.startswith("-")), "")
     parser = build_parser(first if first in {name for name, _, _ in COMMANDS} else "")
-    args = parser.parse_args(argv)
+    empty = next((i for i, a in enumerate(raw) if a == "" or (a.startswith("--") and a.endswith("="))), None)
+    if empty is not None:  # an empty value never means "the default": it is a mistake (an unset variable)
+        after = f" after {_clip(raw[empty - 1])}" if empty > 0 and raw[empty] == "" else f" in {_clip(raw[empty])}"
+        parser.error(f"empty argument{after}")
+    args = parser.parse_args(raw)
     try:
         return int(args._run(args))
     except InputError as exc:
-        print(f"pf-offboard {args.command}: error: {exc}", file=sys.stderr)
+        print(f"pf-offboard {args.command}: error: {_clip(str(exc))}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        if exc.filename is None:
+            raise
+        # a file or directory the user named could not be used (a name too long, a permission):
+        # bad input, one line (each command turns the errors it expects into InputError itself)
+        print(f"pf-offboard {args.command}: error: {_clip(str(exc.filename))}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

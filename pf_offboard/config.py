@@ -543,6 +543,8 @@ def _safety(data: Any) -> SafetyConfig:
         max_attitude_error_deg=num("max_attitude_error_deg", 0.0, 180.0, lo_open=True),
         attitude_error_time_s=num("attitude_error_time_s", 0.0, 60.0),
         max_descent_speed_m_s=num("max_descent_speed_m_s", 0.0, 100.0, lo_open=True),
+        falling_confirm_s=num("falling_confirm_s", 0.0, 5.0),
+        max_estimator_reset_m=num("max_estimator_reset_m", 0.0, 1e4, lo_open=True),
         no_progress_s=num("no_progress_s", 0.0, 3600.0, lo_open=True),
         min_progress_m=num("min_progress_m", 0.0, 1e4, lo_open=True),
         safe_mode_timeout_s=num("safe_mode_timeout_s", 0.0, 600.0, lo_open=True),
@@ -679,13 +681,19 @@ class _StrictLoader:
 
 def load_config(path: str | os.PathLike[str]) -> Config:
     """Read and validate a YAML config file."""
+    from pf_offboard.inputfile import read_bounded
+
     source = os.fspath(path)
     try:
-        with open(source, "rb") as fh:
-            data = fh.read(MAX_CONFIG_BYTES + 1)
-    except OSError as exc:
-        raise ConfigError(source, f"cannot read config file: {exc.strerror or exc}") from None
+        data = read_bounded(source, MAX_CONFIG_BYTES)
+    except ValueError as exc:
+        raise ConfigError(_short(source), f"config file: {exc}") from None
     return parse_config_bytes(data, source)
+
+
+def _short(name: str, limit: int = 200) -> str:
+    """A file name for a one-line message (a 5000-character name is cut in the middle)."""
+    return name if len(name) <= limit else f"{name[: limit // 2]}...{name[-limit // 2 :]} ({len(name)} characters)"
 
 
 def parse_config_bytes(data: bytes, source: str = "<config>") -> Config:

@@ -95,6 +95,9 @@ class GeoPath:
 
 
 # ------------------------------------------------------------------------------------- reading
+MAX_PATH_FILE_BYTES = 16 << 20  # a way-point file of a few thousand points is well below this
+
+
 def read_geopath(path: str | os.PathLike[str]) -> GeoPath:
     """Read a ``.plan`` / ``.waypoints`` / ``.csv`` / ``.geojson`` / ``.json`` / ``.kml`` file."""
     p = Path(path)
@@ -102,10 +105,14 @@ def read_geopath(path: str | os.PathLike[str]) -> GeoPath:
     suffix = p.suffix.lower()
     if suffix not in SUFFIXES:
         raise PathFileError(source, "", f"unknown way-point file type {suffix or '(none)'!r} (use one of {', '.join(SUFFIXES)})")
+    from pf_offboard.inputfile import read_bounded
+
     try:
-        text = p.read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise PathFileError(source, "", f"cannot read: {exc.strerror or exc}") from None
+        text = read_bounded(p, MAX_PATH_FILE_BYTES).decode("utf-8-sig")
+    except ValueError as exc:
+        if isinstance(exc, UnicodeDecodeError):
+            raise PathFileError(source, "", f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        raise PathFileError(source if len(source) <= 200 else source[:100] + "..." + source[-100:], "", str(exc)) from None
     except UnicodeDecodeError as exc:
         raise PathFileError(source, "", f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     if suffix == ".plan":
@@ -167,12 +174,21 @@ def _one_reference(refs: Sequence[tuple[str, str]], source: str) -> str | None:
     return first
 
 
-def parse_plan(text: str, source: str = "<plan>") -> GeoPath:
-    """A QGroundControl ``.plan``: the NAV_WAYPOINT items of ``mission.items``, in order."""
+def _load_json(text: str, source: str) -> object:
+    """JSON text, or one PathFileError: syntax, integers too long to read, nesting too deep."""
     try:
-        data = json.loads(text)
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise PathFileError(source, f"line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
+    except ValueError as exc:  # an integer of more than 4300 digits (Python's int limit)
+        raise PathFileError(source, "", f"unreadable JSON value: {str(exc).split(';')[0]}") from None
+    except RecursionError:
+        raise PathFileError(source, "", "JSON nested too deeply (a way-point file is a few levels deep)") from None
+
+
+def parse_plan(text: str, source: str = "<plan>") -> GeoPath:
+    """A QGroundControl ``.plan``: the NAV_WAYPOINT items of ``mission.items``, in order."""
+    data = _load_json(text, source)
     if not isinstance(data, dict) or data.get("fileType") != "Plan":
         raise PathFileError(source, "", 'not a QGroundControl plan (no "fileType": "Plan")')
     mission = data.get("mission")
@@ -290,10 +306,7 @@ def parse_csv(text: str, source: str = "<csv>") -> GeoPath:
 def parse_geojson(text: str, source: str = "<geojson>") -> GeoPath:
     """A GeoJSON ``LineString`` (bare, in a ``Feature``, or the one LineString of a ``FeatureCollection``);
     every position needs its altitude: ``[lon, lat, alt]``."""
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise PathFileError(source, f"line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
+    data = _load_json(text, source)
     lines: list[tuple[str, object]] = []
 
     def visit(obj: object, where: str) -> None:

@@ -178,6 +178,15 @@ class Autopilot:
             self._pending.append((f.thrust_loss_at_s, "thrust_loss", f.thrust_loss_factor))
         if f.offboard_stuck_at_s is not None:
             self._pending.append((f.offboard_stuck_at_s, "offboard_stuck", None))
+        if f.estimate_lost_at_s is not None:
+            self._pending.append((f.estimate_lost_at_s, "estimate_lost", None))
+        if f.failsafe_at_s is not None:
+            self._pending.append((f.failsafe_at_s, "failsafe", f.failsafe_mode))
+        for item in f.corrupt_states:
+            self._pending.append((item[0], "corrupt_state", tuple(item[1:])))
+        self.estimate_lost = False  # estimate-lost fault: ODOMETRY quality -1, bad estimator reports, drift
+        self._next_health_report_s = 0.0
+        self.failsafe_kind = ""  # "offboard" (PX4 offboard loss: undone when setpoints resume) | "battery"
         self.motors_failed = False  # a motor failure: no thrust whatever the mode (the vehicle falls)
         self.clock_offset_s = f.clock_at_start_s  # added to every timestamp sent (clock faults)
         self.offboard_stuck_at: np.ndarray | None = None  # offboard-stuck fault: where it holds (estimate)
@@ -479,12 +488,15 @@ class Autopilot:
         # NaN in a parameter that is read as an integer counts as 0 (unused / default).
         p = [v if math.isfinite(v) else (v if i == 6 else 0.0) for i, v in enumerate(map(float, p))]
         command = int(msg.command)
+        foreign: list[Out] = []
+        if self.config.faults.foreign_denied_ack and command == mavlink.MAV_CMD_DO_SET_MODE:
+            foreign = [(None, mavlink.MAVLink_command_ack_message(command, mavlink.MAV_RESULT_DENIED, 0, 0, 255, 190))]
         result, extra = self._dispatch(command, p, link)
 
         ack = mavlink.MAVLink_command_ack_message(
             command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
         )
-        return [(link, ack)] + extra
+        return [(link, ack)] + foreign + extra
 
     def _dispatch(self, command: int, p: list[float], link: int) -> tuple[int, list[Out]]:
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
@@ -618,6 +630,8 @@ class Autopilot:
         table = self.streams.get(link)
         if table is None or msgid not in telemetry.BUILDERS:
             return UNSUPPORTED
+        if msgid == mavlink.MAVLINK_MSG_ID_HEARTBEAT and self.config.faults.heartbeat_rate_fixed:
+            return DENIED
         if interval_us == -1:
             table.set_interval(msgid, math.inf, self.time_s)
         elif interval_us == 0:
@@ -660,7 +674,8 @@ class Autopilot:
             self.px4_target = None
             self.guided.hold(pos, vel, yaw)
         elif spec.behaviour is Behaviour.LAND:
-            self.auto_target = np.array([pos[0], pos[1], pos[2]])
+            # brake to the stopping point, then descend there (as PX4 / ArduPilot LAND do from speed)
+            self.auto_target = np.array([self.hold_position[0], self.hold_position[1], pos[2]])
         elif spec.behaviour is Behaviour.RTL:
             self.auto_phase = "climb"
             self.auto_target = self.hold_position.copy()
@@ -674,6 +689,12 @@ class Autopilot:
         """Advance the simulated vehicle by ``dt_s`` and run the mode logic; returns events."""
         out: list[Out] = []
         self._run_scheduled(out)
+        if self.estimate_lost:
+            self.est_offset_ned_m = self.est_offset_ned_m + np.asarray(self.config.faults.estimate_lost_drift_ned_m_s) * dt_s
+            self._estimate_cache = (None, -1, self._estimate_cache[2])
+            if self.time_s >= self._next_health_report_s:
+                self._next_health_report_s = self.time_s + 0.5
+                out.append((None, telemetry.estimator_report(self)))
         self._supervise(out)
         setpoint = self._control(dt_s)
         self._dyn_setpoint = setpoint
@@ -717,6 +738,17 @@ class Autopilot:
             elif kind == "thrust_loss":
                 self.sim.lose_thrust(float(arg))  # type: ignore[arg-type]
                 out.append(self._text(mavlink.MAV_SEVERITY_CRITICAL, "Thrust loss"))
+            elif kind == "corrupt_state":
+                out += [(None, m) for m in telemetry.corrupt_state(self, arg)]  # type: ignore[arg-type]
+                self.log.append(LogEvent(self.time_s, f"corrupt state sample sent: {arg}"))
+            elif kind == "estimate_lost":
+                self.estimate_lost = True
+                out.append(self._text(mavlink.MAV_SEVERITY_CRITICAL, "EKF: position estimate lost"))
+            elif kind == "failsafe" and self.armed:
+                name = str(arg) if arg else self.profile.land_mode
+                self._set_mode(self.profile.mode(name), user=False)
+                self.failsafe, self.failsafe_kind = True, "battery"
+                out.append(self._text(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe activated: battery critical, {name}"))
             elif kind == "offboard_stuck":
                 self.offboard_stuck_at = self._estimate()[0].copy()
                 self.log.append(LogEvent(self.time_s, "offboard setpoints no longer flown (fault injection)"))
@@ -766,9 +798,9 @@ class Autopilot:
                 return
             # 0-2 want RC modes; without RC PX4 falls back to Return (observed on SITL).
             self._set_mode(self.profile.mode(names.get(action, "AUTO.RTL")), user=False)
-            self.failsafe = True
+            self.failsafe, self.failsafe_kind = True, "offboard"
             out.append(self._text(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe activated: no offboard signal"))
-        elif self.failsafe and signal and self.user_mode.behaviour is Behaviour.OFFBOARD:
+        elif self.failsafe and self.failsafe_kind == "offboard" and signal and self.user_mode.behaviour is Behaviour.OFFBOARD:
             # Setpoints resumed: PX4 restores the user-intended mode.
             self._set_mode(self.user_mode, user=True)
             out.append(self._text(mavlink.MAV_SEVERITY_INFO, "Failsafe deactivated"))

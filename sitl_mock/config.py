@@ -159,6 +159,23 @@ class FaultConfig:
     # from offboard_stuck_at_s the autopilot stays in OFFBOARD / GUIDED and accepts setpoints but no
     # longer flies them: it holds where it is (a vehicle that cannot make progress)
     offboard_stuck_at_s: float | None = None
+    # every DO_SET_MODE answered is followed by a DENIED COMMAND_ACK addressed to another GCS
+    # (target system 255, component 190): what a client sees when someone else's request is refused
+    foreign_denied_ack: bool = False
+    # SET_MESSAGE_INTERVAL for HEARTBEAT refused (DENIED), as real PX4 does: HEARTBEAT stays at 1 Hz
+    heartbeat_rate_fixed: bool = False
+    # from estimate_lost_at_s the position estimate is lost: ODOMETRY quality -1, ESTIMATOR_STATUS /
+    # EKF_STATUS_REPORT (2 Hz) without a position solution, and the estimate drifts at
+    # estimate_lost_drift_ned_m_s (a vehicle flown on it drifts the other way)
+    estimate_lost_at_s: float | None = None
+    estimate_lost_drift_ned_m_s: tuple[float, float, float] = (0.6, 0.0, 0.0)
+    # at failsafe_at_s the autopilot's own failsafe (a critical battery) takes over: PX4 AUTO.LAND /
+    # ArduPilot LAND (or failsafe_mode), HEARTBEAT system_status CRITICAL; it is not undone by setpoints
+    failsafe_at_s: float | None = None
+    failsafe_mode: str | None = None
+    # one corrupt LOCAL_POSITION_NED / ODOMETRY sample each (t, dx, dy, dz, vx, vy, vz): at t, 1 ms
+    # after the regular sample, the estimate + (dx, dy, dz) with the velocity (vx, vy, vz) (NED)
+    corrupt_states: tuple[tuple[float, float, float, float, float, float, float], ...] = ()
 
     def validate(self) -> None:
         for name in ("loss", "duplicate", "corrupt", "attitude_reorder"):
@@ -175,11 +192,12 @@ class FaultConfig:
                 t0, t1 = window
                 if not (math.isfinite(t0) and math.isfinite(t1) and 0 <= t0 <= t1):
                     raise MockConfigError(f"faults.{name}", f"need 0 <= t0 <= t1, got {window}")
-        for name in ("estimator_reset_ned_m", "gust_ned_m_s"):
+        for name in ("estimator_reset_ned_m", "gust_ned_m_s", "estimate_lost_drift_ned_m_s"):
             if not all(math.isfinite(v) for v in getattr(self, name)):
                 raise MockConfigError(f"faults.{name}", "values must be finite")
         for name in ("estimator_reset_at_s", "takeover_at_s", "gust_at_s", "disarm_at_s", "motor_failure_at_s",
-                     "clock_jump_at_s", "attitude_future_at_s", "thrust_loss_at_s", "offboard_stuck_at_s"):
+                     "clock_jump_at_s", "attitude_future_at_s", "thrust_loss_at_s", "offboard_stuck_at_s",
+                     "estimate_lost_at_s", "failsafe_at_s"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value >= 0.0):
                 raise MockConfigError(f"faults.{name}", f"must be a finite time >= 0 s, got {value}")
@@ -193,6 +211,9 @@ class FaultConfig:
                                   f"+ jump at {at} s), got {self.clock_jump_s}")
         if not (math.isfinite(self.attitude_future_by_s) and self.attitude_future_by_s > 0.0):
             raise MockConfigError("faults.attitude_future_by_s", f"must be > 0 s, got {self.attitude_future_by_s}")
+        for item in self.corrupt_states:
+            if len(item) != 7 or not all(math.isfinite(v) for v in item) or item[0] < 0.0:
+                raise MockConfigError("faults.corrupt_states", f"each must be (t >= 0, dx, dy, dz, vx, vy, vz), finite; got {item!r}")
         if not (math.isfinite(self.thrust_loss_factor) and 0.0 < self.thrust_loss_factor <= 1.0):
             raise MockConfigError("faults.thrust_loss_factor", f"must be in (0, 1], got {self.thrust_loss_factor}")
 

@@ -27,6 +27,7 @@ from sitl_mock.autopilot import SETPOINT_IDS, Autopilot, Out
 from sitl_mock.config import MockConfig
 from sitl_mock.dynamics import VehicleState
 from sitl_mock.faults import FaultInjector
+from sitl_mock.signing import verify_signature_first
 
 UDP_LINK = 0
 _KEEPALIVE_IDS = (mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_SYS_STATUS)
@@ -45,12 +46,19 @@ class Ports:
 _SIGNING_EPOCH_UNIX_S = 1420070400
 
 
-def new_mavlink(signing_key: bytes | None = None) -> mavlink.MAVLink:
+def new_mavlink(signing_key: bytes | None = None, signing: Any = None) -> mavlink.MAVLink:
     """A per-peer encoder/parser; with ``signing_key`` it signs what it packs and refuses unsigned or
-    wrongly signed frames (pymavlink raises "Invalid signature"; no unsigned callback: refused)."""
+    wrongly signed frames (pymavlink raises "Invalid signature"; no unsigned callback: refused), the
+    signature checked before the frame's timestamp is believed (see sitl_mock.signing).
+    ``signing``: the signing state (timestamps of the streams seen) to share: one per link, as PX4
+    and ArduPilot keep it, so a signed frame replayed from another UDP port is an old one."""
     mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     mav.robust_parsing = True
     if signing_key is not None:
+        verify_signature_first(mav)
+    if signing is not None:
+        mav.signing = signing
+    elif signing_key is not None:
         mav.signing.secret_key = signing_key
         mav.signing.sign_outgoing = True
         mav.signing.link_id = 0
@@ -105,8 +113,8 @@ class _Peer:
 
     __slots__ = ("mav", "write", "link", "buffer")
 
-    def __init__(self, link: int, write: Callable[[bytes], None], signing_key: bytes | None = None) -> None:
-        self.mav = new_mavlink(signing_key)
+    def __init__(self, link: int, write: Callable[[bytes], None], signing_key: bytes | None = None, signing: Any = None) -> None:
+        self.mav = new_mavlink(signing_key, signing)
         self.write = write
         self.link = link
         self.buffer = bytearray()
@@ -163,6 +171,9 @@ class MockAutopilot:
         self.received = 0
         self.steps = 0
         self._signing_key = config.signing_key()
+        # one signing state for the UDP link (every UDP address shares it, like a real autopilot's
+        # link): a stream's timestamp seen from one address is not new again from another
+        self._udp_signing = new_mavlink(self._signing_key).signing if self._signing_key is not None else None
         self.rejected_signature = 0  # frames refused: unsigned or wrongly signed (signing on)
         self.rejected_corrupt = 0  # frames refused: CRC / length
         # called with every accepted message and the sender (UDP address or TCP link number)
@@ -404,7 +415,7 @@ class MockAutopilot:
                 udp.sendto(data, addr)
 
         if peer is None:
-            peer = _Peer(UDP_LINK, write, self._signing_key)
+            peer = _Peer(UDP_LINK, write, self._signing_key, self._udp_signing)
         else:
             peer.write = write
         self._udp_peers[addr] = peer
@@ -416,7 +427,7 @@ class MockAutopilot:
             # signed frame: an unsigned or wrongly keyed sender learns nothing from us.
             if self.config.faults.loss > 0.0 and self.faults.drop_incoming():
                 return
-            probe = _Peer(UDP_LINK, lambda _data: None, self._signing_key)
+            probe = _Peer(UDP_LINK, lambda _data: None, self._signing_key, self._udp_signing)
             msgs = self._parse(probe, data, datagram=True)
             if msgs:
                 self._handle(self._udp_peer(addr, probe), msgs, addr)

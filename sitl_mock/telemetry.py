@@ -160,8 +160,38 @@ def odometry(ap: Autopilot) -> mavlink.MAVLink_message:
     return mavlink.MAVLink_odometry_message(
         _time_usec(ap), mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED,
         x, y, z, [float(c) for c in s.q_ned_frd], vx, vy, vz,
-        p, qr, r, _NAN21, _NAN21, ap.reset_counter & 0xFF, mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT, 100,
+        p, qr, r, _NAN21, _NAN21, ap.reset_counter & 0xFF, mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT, -1 if ap.estimate_lost else 100,
     )
+
+
+def corrupt_state(ap: Autopilot, spec: tuple[float, ...]) -> list[mavlink.MAVLink_message]:
+    """One corrupt state sample (fault injection) as LOCAL_POSITION_NED and ODOMETRY, dated 1 ms
+    after now: the estimate moved by spec[0:3] with the velocity spec[3:6] (NED)."""
+    x, y, z = (float(v) + float(d) for v, d in zip(ap.est_position_ned_m, spec[:3]))
+    vx, vy, vz = (float(v) for v in spec[3:6])
+    s = ap.truth
+    lp = mavlink.MAVLink_local_position_ned_message((_time_boot_ms(ap) + 1) & 0xFFFFFFFF, x, y, z, vx, vy, vz)
+    odo = mavlink.MAVLink_odometry_message(
+        _time_usec(ap) + 1000, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED, x, y, z, [float(c) for c in s.q_ned_frd],
+        vx, vy, vz, *(float(v) for v in s.rates_frd_rad_s), _NAN21, _NAN21, ap.reset_counter & 0xFF,
+        mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT, 100,
+    )  # fmt: skip
+    for m in (lp, odo):
+        m.fault_injected = True
+    return [lp, odo]
+
+
+def estimator_report(ap: Autopilot) -> mavlink.MAVLink_message:
+    """The estimator's health as the autopilot reports it: PX4 ESTIMATOR_STATUS, ArduPilot
+    EKF_STATUS_REPORT. Healthy: attitude, velocities, horizontal (relative and absolute) and
+    vertical position; lost: attitude and vertical only, test ratios / variances above 1."""
+    good = 1 | 2 | 4 | 8 | 16 | 32
+    flags, ratio = (1 | 4 | 32, 2.5) if ap.estimate_lost else (good, 0.1)
+    if ap.profile.name == "px4":
+        return mavlink.MAVLink_estimator_status_message(int(ap.time_s * 1e6), flags, ratio, ratio, ratio, ratio, 0.0, 0.0, 0.1, 0.1)
+    from pymavlink.dialects.v20 import ardupilotmega
+
+    return ardupilotmega.MAVLink_ekf_status_report_message(flags, ratio, ratio, ratio, 0.1, 0.1)
 
 
 def global_position_int(ap: Autopilot) -> mavlink.MAVLink_message:

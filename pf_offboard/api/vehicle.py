@@ -86,6 +86,7 @@ class FollowSettings:
     log_dir: str | None = None  # None: no logs
     quiet: bool | None = None  # None: as connected
     open_path_end: bool = True  # end at the end of an open path
+    offboard_loss: str | None = None  # what the vehicle does if the app dies: None checks it; hold | land sets it
 
     def validated(self) -> FollowSettings:
         if self.launch not in LAUNCHES:
@@ -98,6 +99,8 @@ class FollowSettings:
         for name, value in (("ready_timeout_s", self.ready_timeout_s), ("takeoff_timeout_s", self.takeoff_timeout_s)):
             if value is not None and not (math.isfinite(value) and 0 < value <= 3600):
                 raise InputError(name, f"must be in (0, 3600] s, got {value}")
+        if self.offboard_loss not in (None, "hold", "land"):
+            raise InputError("offboard_loss", f"must be None, hold or land, got {self.offboard_loss!r}")
         if self.state_source not in ("local_position", "odometry"):
             raise InputError("state_source", f"must be local_position or odometry, got {self.state_source!r}")
         return self
@@ -465,7 +468,7 @@ class Vehicle:
         from pf_offboard.app.encoders import Encoder
         from pf_offboard.app.estimator import Estimator
         from pf_offboard.app.flight import Flight, FlightOptions
-        from pf_offboard.app.running import prepare_output, run_flight, stream_requests
+        from pf_offboard.app.running import check_offboard_loss, prepare_output, run_flight, stream_requests
         from pf_offboard.app.settings import envelope_fence, flight_settings_for, rate_bound
         from pf_offboard.app.pipeline import Pipeline
         from pf_offboard.app.rules import EndSpec
@@ -497,7 +500,8 @@ class Vehicle:
 
             make_dir(settings.log_dir, "--log-dir")  # created (or InputError) before anything is sent
             try:
-                log = FlightLog.open(FilePath(settings.log_dir), name=hooks.log_name, config_path=hooks.config_path)
+                log = FlightLog.open(FilePath(settings.log_dir), name=hooks.log_name, config_path=hooks.config_path,
+                                     warn=lambda text: print(f"pf-offboard: warning: {text}", file=self.stream, flush=True))  # fmt: skip
             except OSError as exc:
                 raise InputError("--log-dir", f"cannot write the logs in {settings.log_dir}: {exc.strerror or exc}") from None
             flight_log = log
@@ -574,6 +578,7 @@ class Vehicle:
                         flight.commander.request_interval(msg_id, rate)
                 if not takeoff_only:
                     await prepare_output(flight, dialect, fs, settings.set_guid_options, self.stream, warnings=hooks.output_warnings)
+                    await check_offboard_loss(flight, dialect, fs.output_mode, settings.offboard_loss, self.stream)
 
             try:
                 result = await run_flight(flight, setup)

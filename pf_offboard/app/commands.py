@@ -19,12 +19,14 @@ What the flight does with a confirmation, a takeover or a failsafe is the flight
 from __future__ import annotations
 
 import enum
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from pf_offboard.app.modes import Event, ModeTracker
 from pf_offboard.app.profiles import ModeRequest, Profile, is_armed
 from pf_offboard.app.waiting import Waiter
 from pf_offboard.errors import LinkError
@@ -65,10 +67,22 @@ class ModeChange(enum.Enum):
 
 
 class ModeWatch:
-    """The autopilot's mode and armed state as its HEARTBEATs report them, and our modes."""
+    """The autopilot's mode and armed state as its HEARTBEATs report them, and our modes.
 
-    def __init__(self, profile: Profile) -> None:
+    ``tracker`` (:class:`~pf_offboard.app.modes.ModeTracker`, pure) holds the requests: a mode we
+    asked for counts as confirmed only on a HEARTBEAT received after the request was sent (and,
+    while an earlier request may still land, late enough for the autopilot to have handled it);
+    ``clock`` stamps requests and HEARTBEATs (monotonic seconds)."""
+
+    def __init__(self, profile: Profile, clock: Callable[[], float] = time.monotonic) -> None:
         self.profile = profile
+        self.clock = clock
+        self.tracker = ModeTracker(
+            same_mode=lambda a, b: a == b or (profile.is_offboard(a) and profile.is_offboard(b)),
+            failsafe_modes=profile.failsafe_custom_modes,
+            name=profile.mode_name,
+            retry_s=SAFE_MODE_RETRY_S,
+        )
         self.custom_mode: int | None = None
         self.base_mode = 0
         self.previous_mode: int | None = None  # custom_mode before the last HEARTBEAT
@@ -78,10 +92,11 @@ class ModeWatch:
         self.held_mode: int | None = None
         self.pending_mode: int | None = None
 
-    def record(self, msg: Any) -> None:
-        """Every HEARTBEAT of the target: its mode and armed flag."""
+    def record(self, msg: Any) -> Event:
+        """Every HEARTBEAT of the target: its mode and armed flag (and what it means for our requests)."""
         self.previous_mode = self.custom_mode
         self.custom_mode, self.base_mode = msg.custom_mode, msg.base_mode
+        return self.tracker.on_heartbeat(int(msg.custom_mode), int(getattr(msg, "system_status", 0)), self.clock())
 
     @property
     def armed(self) -> bool:
@@ -100,10 +115,12 @@ class ModeWatch:
             self.held_mode, self.pending_mode = custom_mode, None
 
     def classify(self, msg: Any) -> ModeChange:
-        """Whose mode a HEARTBEAT shows while we may be in control."""
-        if not self.in_control() or self.mode_is_ours(msg.custom_mode):
+        """Whose mode a HEARTBEAT shows while we may be in control: ours, the autopilot's failsafe
+        (system status CRITICAL / EMERGENCY, or a return / land mode we did not ask for), or the
+        operator's (any other mode we did not ask for)."""
+        if not self.in_control() or self.mode_is_ours(msg.custom_mode) or self.tracker.is_ours(int(msg.custom_mode)):
             return ModeChange.OURS
-        if msg.system_status >= MAV_STATE_CRITICAL:
+        if msg.system_status >= MAV_STATE_CRITICAL or msg.custom_mode in self.profile.failsafe_custom_modes:
             return ModeChange.FAILSAFE
         return ModeChange.OPERATOR
 
@@ -117,11 +134,20 @@ class ModeWatch:
     def mode_is_ours(self, custom_mode: int) -> bool:
         return any(m is not None and self.same_mode(custom_mode, m) for m in (self.held_mode, self.pending_mode))
 
-    def asked(self, mode: ModeRequest) -> None:
-        """We are about to request ``mode``."""
+    def asked(self, mode: ModeRequest) -> bool:
+        """We are about to request ``mode``; False: we may not (the autopilot's failsafe or the
+        operator has the vehicle): send nothing."""
+        if not self.tracker.request(self.profile.custom_mode_of(mode), self.clock()):
+            return False
         if self.held_mode is None:
             self.held_mode = self.custom_mode  # what the vehicle was in when we first asked
         self.pending_mode = self.profile.custom_mode_of(mode)
+        return True
+
+    def confirmed(self, mode: ModeRequest) -> bool:
+        """A HEARTBEAT received after our request for ``mode`` shows it (evidence newer than the
+        request; see :class:`~pf_offboard.app.modes.ModeTracker`)."""
+        return self.tracker.is_confirmed(self.profile.custom_mode_of(mode))
 
     def shows(self, mode: ModeRequest) -> bool:
         """The last HEARTBEAT shows ``mode`` (OFFBOARD: any sub mode)."""
@@ -164,7 +190,10 @@ class Commander:
         self.last_statustext = ""
 
     def on_ack(self, msg: Any) -> None:
+        """A COMMAND_ACK for us (the link drops those addressed to another system / component)."""
         self.acks[msg.command] = msg.result
+        if msg.command == mavlink2.MAV_CMD_DO_SET_MODE:
+            self.modes.tracker.on_ack(int(msg.result), ours=True)
         self.waiter.notify()
 
     def command(self, command: int, *params: float) -> None:
@@ -176,7 +205,8 @@ class Commander:
     def set_mode_nowait(self, mode: ModeRequest) -> None:
         if self.yielded():
             return  # the operator has the vehicle: never ask for a mode again
-        self.modes.asked(mode)
+        if not self.modes.asked(mode):
+            return  # the autopilot's failsafe (or the operator) has the vehicle: never override it
         self.command(mavlink2.MAV_CMD_DO_SET_MODE, 1.0, mode.param2, mode.param3)
 
     def request_offboard_nowait(self) -> None:
@@ -223,7 +253,7 @@ class Commander:
     async def set_mode(self, mode: ModeRequest, timeout_s: float | None = None) -> None:
         """Request ``mode`` until a HEARTBEAT shows it."""
         await self.confirmed(
-            f"mode {mode.name}", lambda: self.set_mode_nowait(mode), lambda: self.modes.shows(mode), mavlink2.MAV_CMD_DO_SET_MODE, timeout_s
+            f"mode {mode.name}", lambda: self.set_mode_nowait(mode), lambda: self.modes.confirmed(mode), mavlink2.MAV_CMD_DO_SET_MODE, timeout_s
         )
 
     async def arm(self, timeout_s: float | None = None) -> None:
@@ -240,19 +270,20 @@ class Commander:
     async def request_mode_until_shown(self, mode: ModeRequest, timeout_s: float, still: Callable[[], bool]) -> bool:
         """The safe-mode request: re-sent every SAFE_MODE_RETRY_S while ``still()`` until a
         HEARTBEAT shows ``mode`` or ``timeout_s`` passes (wall clock). True when confirmed."""
-        custom = self.profile.custom_mode_of(mode)
         clock = self.waiter.clock
         deadline = clock() + timeout_s
         confirmed = False
         while still():
-            confirmed = self.modes.custom_mode == custom
-            if confirmed or clock() > deadline:
+            # only a HEARTBEAT received after our request counts (never the one that was already
+            # there: it may predate an OFFBOARD request still on its way)
+            confirmed = self.modes.confirmed(mode)
+            if confirmed or clock() > deadline or self.modes.tracker.yielded:
                 break
             try:
                 self.set_mode_nowait(mode)
             except LinkError:
                 pass
-            await self.waiter.until(lambda: not still() or self.modes.custom_mode == custom, SAFE_MODE_RETRY_S, interruptible=False)
+            await self.waiter.until(lambda: not still() or self.modes.confirmed(mode), SAFE_MODE_RETRY_S, interruptible=False)
         return confirmed
 
     async def request_intervals(self, requests: list[tuple[int, float, str]], ack_timeout_s: float = 1.0) -> None:

@@ -97,8 +97,7 @@ def run(args: argparse.Namespace) -> int:
     config_path = resolve_config(args.config) if args.config else paper_config(vehicle)
     if not (args.laps > 0):
         raise InputError("--laps", f"must be > 0, got {args.laps}")
-    stamped = default_log_dir()
-    log_dir = Path(args.log_dir) if args.log_dir else stamped.with_name("demo-" + stamped.name)
+    log_dir = Path(args.log_dir) if args.log_dir else default_log_dir("demo-")
     if args.log_dir:
         from pf_offboard.logs._io import make_dir
 

@@ -24,6 +24,20 @@ Plausibility (telemetry can be late, duplicated, corrupt in ways the CRC passes,
   if the next sample confirms the new place it is accepted as an estimator reset
   (``position_resets``, ``reset_pending`` with ``reset_reason``). ODOMETRY's reset_counter
   announces a reset itself and is believed.
+- physical limits: a sample claiming more than MAX_SPEED_M_S, or a velocity change from the last
+  trusted sample beyond what MAX_ACCEL_M_S2 allows, is refused like a position jump (until the next
+  sample confirms it). The distance a vehicle may have moved is bounded by the *previous trusted*
+  speed, never by the new sample's own claim (a corrupt x = 40 m with vx = 5000 m/s is refused).
+- resets of any size: a sample whose position step differs from the one its velocity explains by
+  more than RESET_STEP_M (plus what the velocity change explains) is accepted but flagged as an
+  estimator reset (``position_resets``, ``last_reset_enu_m``); so is an ODOMETRY reset_counter
+  change. What a reset means for the flight is the envelope's decision (safety.max_estimator_reset_m).
+- health: ODOMETRY ``quality`` -1 (estimate lost) refuses that sample; ESTIMATOR_STATUS (PX4) and
+  EKF_STATUS_REPORT (ArduPilot) reports missing a needed solution (attitude, velocity, relative
+  horizontal and vertical position), flagging a glitch / constant-position mode, or with a test
+  ratio / variance at or above 1 make the estimate *degraded* once HEALTH_CONFIRM reports in a row
+  say so (never on one report): position samples are then refused (``rejected_unhealthy``,
+  ``health_reason`` says why) until a healthy report; the state goes stale and following ends.
 - ``StateEstimate.clock_s`` is one continuous clock over the flight (jumps excluded), for
   durations: a clock jump does not make a duration span two clocks.
 
@@ -110,6 +124,17 @@ CONFIRM_WINDOW_S = 1.0
 # 5 m/s: a hard manoeuvre's speed change over one sample interval, generously.
 JUMP_MARGIN_M = 1.0
 JUMP_SPEED_SLACK_M_S = 5.0
+# Physical limits of the vehicles this app flies (generous): a sample beyond them is corrupt.
+MAX_SPEED_M_S = 40.0
+MAX_ACCEL_M_S2 = 40.0  # ~4 g between two samples
+VELOCITY_MARGIN_M_S = 3.0  # velocity noise / small estimator velocity corrections between samples
+# A position step this much larger than the velocity explains is an estimator reset (flagged).
+RESET_STEP_M = 0.3
+# Estimator health reports (ESTIMATOR_STATUS / EKF_STATUS_REPORT): this many bad in a row degrade it.
+HEALTH_CONFIRM = 2
+# ESTIMATOR_STATUS_FLAGS (PX4) and EKF_STATUS_FLAGS (ArduPilot) share these bits.
+_NEEDED_FLAGS = 1 | 2 | 4 | 8 | 32  # attitude, horizontal / vertical velocity, relative horizontal and vertical position
+_BAD_FLAGS = {128: "constant position mode", 1024: "GPS glitch / uninitialised", 2048: "accelerometer error", 32768: "GPS glitching"}
 
 NEW, OLD, PENDING, REANCHOR = "new", "old", "pending", "reanchor"
 
@@ -226,7 +251,11 @@ class Estimator:
         self.rejected = 0
         self.rejected_old = 0
         self.rejected_jumps = 0
+        self.rejected_unhealthy = 0  # samples refused: ODOMETRY quality -1, or the estimator reports degraded
         self.position_resets = 0
+        self.last_reset_enu_m: NDArray[np.float64] | None = None  # the latest reset's jump (ENU m)
+        self.health_reason = ""  # why the estimate is degraded ("" healthy)
+        self._bad_reports = 0
         self.clock_jumps = 0
         self.clock_reanchors = 0
         self.last_event = ""
@@ -266,9 +295,36 @@ class Estimator:
             return self._local_position(msg)
         if kind == "ODOMETRY" and self._source in ("auto", "odometry"):
             return self._odometry(msg)
+        if kind in ("ESTIMATOR_STATUS", "EKF_STATUS_REPORT"):
+            self._health_report(kind, msg)
         return False
 
-    def _reset(self, reason: str) -> None:
+    def _health_report(self, kind: str, msg: Any) -> None:
+        """ESTIMATOR_STATUS (PX4) / EKF_STATUS_REPORT (ArduPilot): degraded after HEALTH_CONFIRM
+        bad reports in a row, healthy again on the first good one."""
+        why = estimator_report_problem(kind, msg)
+        if not why:
+            self._bad_reports = 0
+            if self.health_reason:
+                self.last_event = f"estimator healthy again ({kind})"
+            self.health_reason = ""
+            return
+        self._bad_reports += 1
+        if self._bad_reports >= HEALTH_CONFIRM and not self.health_reason:
+            self.health_reason = f"{kind}: {why}"
+            self.last_event = f"estimator degraded: {self.health_reason}"
+
+    def _unhealthy(self) -> bool:
+        """Refuse a position sample while the estimator reports itself degraded (counted)."""
+        if not self.health_reason:
+            return False
+        self.rejected += 1
+        self.rejected_unhealthy += 1
+        return True
+
+    def _reset(self, reason: str, jump_ned_m: NDArray[np.float64] | None = None) -> None:
+        # None: a reset of unknown size (a clock re-anchoring): no size to judge it by
+        self.last_reset_enu_m = frames.ned_to_enu(jump_ned_m) if jump_ned_m is not None else None
         self._vc_skip = True  # the position jumped: this sample's Δposition is not a velocity
         self.reset_pending = True
         self.reset_reason = reason
@@ -306,27 +362,43 @@ class Estimator:
         self.attitude_samples += 1
 
     def _plausible(self, time_s: float, pos_ned: NDArray[np.float64], vel_ned: NDArray[np.float64], verdict: str, announced: bool) -> bool:
-        """Position-jump check of a sample whose time was accepted; False: refused (counted)."""
+        """Position-jump and physical-limit check of a sample whose time was accepted; False:
+        refused (counted). Resets of any size are flagged here (accepted)."""
         last = self._latest
-        if last is None or verdict == REANCHOR or announced:
+        if last is None or verdict == REANCHOR:
             self._jump_candidate = None
-            return True
+            return float(np.linalg.norm(vel_ned)) <= MAX_SPEED_M_S or self._refuse_jump(time_s, pos_ned, vel_ned, last)
         prev_pos = frames.enu_to_ned(last.position_enu_m)
-        prev_speed = float(np.linalg.norm(last.velocity_enu_m_s))
-        if _consistent(prev_pos, prev_speed, last.time_s, pos_ned, vel_ned, time_s):
+        prev_vel = frames.enu_to_ned(last.velocity_enu_m_s)
+        if announced or _consistent(prev_pos, prev_vel, last.time_s, pos_ned, vel_ned, time_s):
             self._jump_candidate = None  # continues the accepted track (drops an unconfirmed jump)
+            step = _unexplained_step(prev_pos, prev_vel, last.time_s, pos_ned, vel_ned, time_s)
+            if not announced and float(np.linalg.norm(step)) > RESET_STEP_M + 0.5 * float(np.linalg.norm(vel_ned - prev_vel)) * max(time_s - last.time_s, 0.0):
+                self.position_resets += 1
+                self._reset(f"position stepped {float(np.linalg.norm(step)):.2f} m beyond its velocity (estimator reset)", step)
             return True
         jump_m = float(np.linalg.norm(pos_ned - prev_pos))
         c = self._jump_candidate
-        if c is not None and 0.0 < time_s - c[0] <= CONFIRM_WINDOW_S and _consistent(c[1], float(np.linalg.norm(c[2])), c[0], pos_ned, vel_ned, time_s):
+        if c is not None and 0.0 < time_s - c[0] <= CONFIRM_WINDOW_S and _consistent(c[1], c[2], c[0], pos_ned, vel_ned, time_s):
             self._jump_candidate = None
             self.position_resets += 1
-            self._reset(f"position jumped {jump_m:.2f} m in {time_s - last.time_s:.3f} s (confirmed: estimator reset)")
+            self._reset(f"position jumped {jump_m:.2f} m in {time_s - last.time_s:.3f} s (confirmed: estimator reset)",
+                        _unexplained_step(prev_pos, prev_vel, last.time_s, pos_ned, vel_ned, time_s))  # fmt: skip
             return True
+        return self._refuse_jump(time_s, pos_ned, vel_ned, last)
+
+    def _refuse_jump(self, time_s: float, pos_ned: NDArray[np.float64], vel_ned: NDArray[np.float64], last: StateEstimate | None) -> bool:
         self._jump_candidate = (time_s, pos_ned, vel_ned)
         self.rejected += 1
         self.rejected_jumps += 1
-        self.last_event = f"position jumped {jump_m:.2f} m in {time_s - last.time_s:.3f} s; refused until confirmed"
+        speed = float(np.linalg.norm(vel_ned))
+        if last is None:
+            self.last_event = f"sample claims {speed:.1f} m/s (beyond {MAX_SPEED_M_S:g} m/s); refused"
+        else:
+            jump_m = float(np.linalg.norm(pos_ned - frames.enu_to_ned(last.position_enu_m)))
+            dv = float(np.linalg.norm(vel_ned - frames.enu_to_ned(last.velocity_enu_m_s)))
+            self.last_event = (f"position jumped {jump_m:.2f} m, velocity {dv:.1f} m/s in {time_s - last.time_s:.3f} s "
+                               "(beyond the vehicle's limits); refused until confirmed")  # fmt: skip
         return False
 
     def _accept(self, time_s: float, pos_ned: NDArray[np.float64], vel_ned: NDArray[np.float64], source: str, verdict: str) -> bool:
@@ -374,6 +446,8 @@ class Estimator:
         if not _finite(*values):
             self.rejected += 1
             return False
+        if self._unhealthy():
+            return False
         verdict = self._position_time(t)
         if verdict is None:
             return False
@@ -396,6 +470,13 @@ class Estimator:
         if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(vel))) or q is None:
             self.rejected += 1
             return False
+        if int(getattr(msg, "quality", 0)) < 0:  # -1: the estimate has failed (MAVLink ODOMETRY.quality)
+            self.rejected += 1
+            self.rejected_unhealthy += 1
+            self.last_event = "ODOMETRY quality -1 (estimate lost): sample refused"
+            return False
+        if self._unhealthy():
+            return False
         verdict = self._position_time(t)
         if verdict is None:
             return False
@@ -412,15 +493,54 @@ class Estimator:
             self._rates_frd = rates
         self.attitude_samples += 1
         if announced:
-            self._reset(f"estimator reset_counter {self._reset_counter} -> {counter}")
+            self.position_resets += 1
+            last = self._latest
+            jump = None
+            if last is not None:
+                jump = _unexplained_step(frames.enu_to_ned(last.position_enu_m), frames.enu_to_ned(last.velocity_enu_m_s), last.time_s, pos, vel, t)
+            self._reset(f"estimator reset_counter {self._reset_counter} -> {counter}", jump)
         self._reset_counter = counter
         return self._accept(t, pos, vel, "odometry", verdict)
 
 
 def _consistent(
-    p0_ned: NDArray[np.float64], speed0_m_s: float, t0_s: float, p1_ned: NDArray[np.float64], v1_ned: NDArray[np.float64], t1_s: float
+    p0_ned: NDArray[np.float64], v0_ned: NDArray[np.float64], t0_s: float, p1_ned: NDArray[np.float64], v1_ned: NDArray[np.float64], t1_s: float
 ) -> bool:
-    """Could a vehicle at p0 (speed0) at t0 be at p1 (velocity v1) at t1? (generous bound)"""
+    """Could a vehicle at p0 with velocity v0 (trusted) at t0 be at p1 with velocity v1 at t1?
+    (generous bounds: speed, acceleration; the distance from the *trusted* speed only)"""
     dt = max(t1_s - t0_s, 0.0)
-    allowed = JUMP_MARGIN_M + (max(speed0_m_s, float(np.linalg.norm(v1_ned))) + JUMP_SPEED_SLACK_M_S) * dt
+    if float(np.linalg.norm(v1_ned)) > MAX_SPEED_M_S or float(np.linalg.norm(v0_ned)) > MAX_SPEED_M_S:
+        return False
+    if float(np.linalg.norm(v1_ned - v0_ned)) > VELOCITY_MARGIN_M_S + MAX_ACCEL_M_S2 * dt:
+        return False
+    allowed = JUMP_MARGIN_M + (float(np.linalg.norm(v0_ned)) + JUMP_SPEED_SLACK_M_S) * dt
     return float(np.linalg.norm(p1_ned - p0_ned)) <= allowed
+
+
+def _unexplained_step(
+    p0_ned: NDArray[np.float64], v0_ned: NDArray[np.float64], t0_s: float, p1_ned: NDArray[np.float64], v1_ned: NDArray[np.float64], t1_s: float
+) -> NDArray[np.float64]:
+    """The part of a position step the two samples' mean velocity does not explain (NED m)."""
+    dt = max(t1_s - t0_s, 0.0)
+    return (p1_ned - p0_ned) - 0.5 * (v0_ned + v1_ned) * dt
+
+
+def estimator_report_problem(kind: str, msg: Any) -> str:
+    """Why an ESTIMATOR_STATUS / EKF_STATUS_REPORT says the position estimate is not fit to fly
+    on ("" if it is): a needed solution missing, a glitch flag, a test ratio / variance >= 1."""
+    try:
+        flags = int(msg.flags)
+    except (AttributeError, TypeError, ValueError):
+        return "no flags"
+    missing = _NEEDED_FLAGS & ~flags
+    if missing:
+        return f"flags 0x{flags:x} lack a needed solution (0x{missing:x})"
+    for bit, name in _BAD_FLAGS.items():
+        if flags & bit:
+            return f"flags 0x{flags:x}: {name}"
+    ratios = ("vel_ratio", "pos_horiz_ratio", "pos_vert_ratio") if kind == "ESTIMATOR_STATUS" else ("velocity_variance", "pos_horiz_variance", "pos_vert_variance")
+    for name in ratios:
+        value = float(getattr(msg, name, 0.0))
+        if not math.isfinite(value) or value >= 1.0:
+            return f"{name} {value:.2f} (>= 1: the estimate fails its own consistency test)"
+    return ""

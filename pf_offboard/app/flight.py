@@ -36,6 +36,7 @@ from pf_offboard.app.params import Parameters
 from pf_offboard.app.phases import (
     EXIT_BREACH,
     EXIT_CRASH,
+    EXIT_FAILSAFE,
     EXIT_INTERRUPTED,
     EXIT_LINK,
     EXIT_OK,
@@ -109,7 +110,7 @@ class Flight:
         self.phase = Phase.PREFLIGHT
         self.display = StatusDisplay(status_stream if status_stream is not None else sys.stderr, options.status, clock)
         self.waiter = Waiter(clock, lambda: self.phase in INTERRUPTING)
-        self.modes = ModeWatch(profile)
+        self.modes = ModeWatch(profile, clock)
         self.commander = Commander(
             link, self.modes, self.waiter, CommandTiming(options.command_timeout_s, options.progress_every_s),
             self.display.say, self.display.note, lambda: self.phase is Phase.TAKEN_OVER,
@@ -218,8 +219,20 @@ class Flight:
     def _end_mode(self) -> ModeRequest:
         return self.profile.land if self.options.end_action == "land" else self.profile.hold
 
+    def _refuse_foreign_offboard(self) -> None:
+        """Already in OFFBOARD / GUIDED, and not by our request: another controller (a second
+        pf-offboard, a GCS script) may be flying it. Two controllers fight (13.5 s seen, undetected):
+        refuse, sending nothing."""
+        self.phase = Phase.TAKEN_OVER
+        self._last_setpoint = None
+        self._finish(EXIT_TAKEOVER, f"the vehicle is already in {self.profile.offboard.name}, which we did not start: another "
+                                    f"controller may be flying it; nothing sent (switch it to {self.profile.hold.name} first)")  # fmt: skip
+
     async def _launch(self) -> None:
         opts = self.options
+        if opts.launch == "airborne" and self.modes.custom_mode is not None and not self._neutral_allowed():
+            self._refuse_foreign_offboard()  # before waiting for anything: nothing of ours may fly
+            return
         ready_deadline = self.clock() + opts.ready_timeout_s
         # the take-off heading comes from the attitude: wait for an attitude sample too
         est = await self._first_state(ready_deadline, need_attitude=opts.launch == "takeoff")
@@ -241,8 +254,8 @@ class Flight:
             if not self.modes.armed:
                 raise CommandRefusedError("--airborne: the vehicle is not armed (is it flying?)", mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, None)
             if not self._neutral_allowed():
-                # already in OFFBOARD / GUIDED: whatever we send flies at once, so engage now
-                self._engage("activated (airborne, already in " + self.profile.offboard.name + ")")
+                self._refuse_foreign_offboard()
+                return
             else:
                 # stream the follower's setpoints (proof of life), then switch
                 self.phase = Phase.WAITING
@@ -413,10 +426,14 @@ class Flight:
         old = self.profile.mode_name(modes.previous_mode) if modes.previous_mode is not None else "?"
         new = self.profile.mode_name(msg.custom_mode)
         if change is ModeChange.FAILSAFE:
-            # the autopilot's own failsafe (e.g. PX4 offboard loss -> RTL), not an operator: ask for
-            # our safe mode instead (an RTL climbs to tens of metres)
-            if phase is not Phase.SAFING:
-                self._enter_safing(EXIT_LINK, f"autopilot failsafe: mode {old} -> {new}")
+            # The autopilot's own failsafe (a critical battery's LAND, a return, any mode with system
+            # status CRITICAL / EMERGENCY) wins, like the operator: we stop commanding at once and
+            # never ask for a mode over it (a hold requested over a battery LAND kept the vehicle up).
+            self._last_setpoint = None
+            self._safe_msg = None
+            self.phase = Phase.FAILED
+            self._finish(EXIT_FAILSAFE, f"the autopilot's failsafe took over during {phase.value}: mode {old} -> {new} "
+                                        f"(system status {msg.system_status}); stopped commanding, not overriding it")  # fmt: skip
             return
         # The operator (RC / ground station) took over: yield at once, never re-engage, in any phase.
         self.phase = Phase.TAKEN_OVER
@@ -657,6 +674,9 @@ class Flight:
                     continue
             if phase in (Phase.FOLLOWING, Phase.ENGAGING):
                 why = self.supervisor.stale_state(now - self._last_fresh_wall, self.options.state_timeout_s)
+                estimator = self.pipeline.estimator
+                if why and (estimator.health_reason or "quality -1" in estimator.last_event):
+                    why += f" (the estimate is refused: {estimator.health_reason or estimator.last_event})"
                 if why:
                     self._enter_safing(EXIT_LINK, why)
                     continue

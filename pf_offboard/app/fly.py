@@ -67,6 +67,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="--takeoff/--airborne: wait up to S seconds for the position estimate and arming checks (default 120)")  # fmt: skip
     parser.add_argument("--takeoff-timeout", type=float, metavar="S",
                         help="--takeoff: give up if the take-off altitude is not held within S seconds (default 30 + 5 s per metre)")  # fmt: skip
+    parser.add_argument("--offboard-loss", choices=("check", "hold", "land"), default="check",
+                        help="what the vehicle does if the app dies: check (read and report it, refuse if the motors would "
+                             "stop), or set it to hold / land where the autopilot allows (PX4 COM_OBL_RC_ACT); see docs/safety.md")  # fmt: skip
     parser.add_argument("--log-dir", metavar="DIR", help="default: ./flights/<UTC timestamp>/")
     parser.add_argument("--quiet", action="store_true", help="no status line")
     parser.add_argument("--json", action="store_true", help="print the flight report (as in LOG_DIR/summary.json) as JSON on stdout")
@@ -90,19 +93,24 @@ def _heights_from_config(args: argparse.Namespace, config: Any) -> None:
             raise InputError("--throw", "no height given and the config has no flight.throw_activation_height_m")
 
 
+# Durations and counts below these mean nothing a vehicle can fly (1e-320 s is not a duration): refused.
+MIN_DURATION_S = 0.01
+MIN_LAPS = 1e-3
+
+
 def _check_args(args: argparse.Namespace) -> None:
     for flag, value in (("--takeoff", args.takeoff), ("--throw", args.throw)):
         if value is not None and not (math.isfinite(value) and 0.3 <= value <= 100.0):
             raise InputError(flag, f"height must be in [0.3, 100] m, got {value}")
-    if args.laps is not None and not (math.isfinite(args.laps) and args.laps > 0):
-        raise InputError("--laps", f"must be > 0, got {args.laps}")
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise InputError("--duration", f"must be > 0 s, got {args.duration}")
-    if not (math.isfinite(args.heartbeat_timeout) and args.heartbeat_timeout > 0):
-        raise InputError("--heartbeat-timeout", f"must be > 0 s, got {args.heartbeat_timeout}")
+    if args.laps is not None and not (math.isfinite(args.laps) and MIN_LAPS <= args.laps <= 1e6):
+        raise InputError("--laps", f"must be in [{MIN_LAPS:g}, 1e6], got {args.laps}")
+    if args.duration is not None and not (math.isfinite(args.duration) and MIN_DURATION_S <= args.duration <= 1e6):
+        raise InputError("--duration", f"must be in [{MIN_DURATION_S:g}, 1e6] s, got {args.duration}")
+    if not (math.isfinite(args.heartbeat_timeout) and MIN_DURATION_S <= args.heartbeat_timeout <= 3600):
+        raise InputError("--heartbeat-timeout", f"must be in [{MIN_DURATION_S:g}, 3600] s, got {args.heartbeat_timeout}")
     for flag, value in (("--ready-timeout", getattr(args, "ready_timeout", 120.0)), ("--takeoff-timeout", getattr(args, "takeoff_timeout", None))):
-        if value is not None and not (math.isfinite(value) and 0 < value <= 3600):
-            raise InputError(flag, f"must be in (0, 3600] s, got {value}")
+        if value is not None and not (math.isfinite(value) and MIN_DURATION_S <= value <= 3600):
+            raise InputError(flag, f"must be in [{MIN_DURATION_S:g}, 3600] s, got {value}")
     if args.target_system is not None and not 1 <= args.target_system <= 255:
         raise InputError("--target-system", f"must be a MAVLink system id in 1..255, got {args.target_system}")
 
@@ -177,6 +185,7 @@ class FlyRequest:
     log_dir: str | None = None
     quiet: bool = False
     json: bool = False
+    offboard_loss: str | None = None  # None: check only; "hold" / "land": set the autopilot's action
 
 
 def request_from_args(args: argparse.Namespace, config: Any) -> FlyRequest:
@@ -194,6 +203,7 @@ def request_from_args(args: argparse.Namespace, config: Any) -> FlyRequest:
         experimental_output=bool(getattr(args, "experimental_output", False)),
         ready_timeout_s=getattr(args, "ready_timeout", 120.0), takeoff_timeout_s=getattr(args, "takeoff_timeout", None),
         log_dir=args.log_dir, quiet=bool(args.quiet), json=bool(getattr(args, "json", False)),
+        offboard_loss=None if getattr(args, "offboard_loss", "check") == "check" else args.offboard_loss,
     )  # fmt: skip
 
 
@@ -207,7 +217,8 @@ def fly(args: argparse.Namespace, status_stream: TextIO | None = None, on_start:
     from pf_offboard.config import load_config
     from pf_offboard.shipped import resolve_config
 
-    endpoint = parse_endpoint(args.connect)  # InputError before anything is opened
+    endpoint = parse_endpoint(args.connect)
+    endpoint.check_local()  # InputError before anything is opened
     signing_key = signing_key_from_args(args)
     args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     config = load_config(args.config)
@@ -273,7 +284,7 @@ async def _fly(
         output=settings.output_mode, end_action=settings.end_action, state_source=request.state_source,
         set_guid_options=request.set_guid_options, experimental_output=request.experimental_output,
         ready_timeout_s=request.ready_timeout_s, takeoff_timeout_s=request.takeoff_timeout_s,
-        log_dir=request.log_dir or str(default_log_dir()),
+        log_dir=request.log_dir or str(default_log_dir()), offboard_loss=request.offboard_loss,
     )  # fmt: skip
     hooks = FlightHooks(on_start=started, on_end=ended, fence=fence, config_path=request.config_path)
     async with Vehicle(connect, stream) as vehicle:
@@ -297,7 +308,10 @@ def _write_summary_json(as_json: bool, code: int, reason: str, summary: Any, log
     from pf_offboard.logs.summary import flight_report, report_json, write_report
 
     report = flight_report(summary, code, reason, log_dir, config)
-    write_report(report, log_dir)
+    try:
+        write_report(report, log_dir)
+    except OSError as exc:  # a full disk: the flight's outcome is still reported on the terminal
+        print(f"pf-offboard fly: warning: cannot write {log_dir}/summary.json: {exc.strerror or exc}", file=sys.stderr)
     if as_json:
         print(report_json(report))
 

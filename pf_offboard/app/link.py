@@ -20,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from pf_offboard.app.signing import verify_signature_first
 from pf_offboard.errors import InputError, LinkError
 
 # MAVLink 2 framing (ODOMETRY and others have ids > 255): must be chosen before mavutil is imported.
@@ -55,6 +56,30 @@ class Endpoint:
     kind: str
     address: str
     port: int
+
+    def check_local(self) -> None:
+        """Bad input found before opening (InputError naming --connect): a serial device that does
+        not exist or is not a character device (a regular file, a directory, /dev/null is one: it
+        is opened and fails then)."""
+        if self.kind != "serial":
+            return
+        import stat
+
+        try:
+            st = os.stat(self.address)
+        except (OSError, ValueError) as exc:
+            raise InputError("--connect", f"serial device {_clip(self.address)}: {getattr(exc, 'strerror', None) or exc}") from None
+        if not stat.S_ISCHR(st.st_mode):
+            raise InputError("--connect", f"serial device {_clip(self.address)}: not a character device")
+        try:  # a character device that is not a terminal (/dev/zero, /dev/null) is no serial port
+            fd = os.open(self.address, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0))
+        except OSError:
+            return  # busy or not permitted: opening it for real reports that (a link error)
+        try:
+            if not os.isatty(fd):
+                raise InputError("--connect", f"serial device {_clip(self.address)}: not a serial port (not a terminal device)")
+        finally:
+            os.close(fd)
 
     def mavutil_url(self) -> str:
         """The string pymavlink's ``mavlink_connection`` understands."""
@@ -144,9 +169,29 @@ def _host_port(text: str, kind: str, rest: str, form: str, field: str) -> Endpoi
     value = int(number)
     if not 1 <= value <= 65535:
         raise InputError(field, f"{text!r}: port {value} is outside 1..65535")
-    if not _HOST_RE.match(address):
-        raise InputError(field, f"{text!r}: host {address!r} is not a host name or IPv4 address")
+    why = _host_problem(address)
+    if why:
+        raise InputError(field, f"{_clip(text)}: host {_clip(address)!r} {why}")
     return Endpoint(kind, address, value)
+
+
+def _clip(text: str, limit: int = 80) -> str:
+    return text if len(text) <= limit else f"{text[: limit // 2]}...{text[-limit // 2 :]}"
+
+
+def _host_problem(host: str) -> str:
+    """Why ``host`` is not an IPv4 address or a host name ("" if it is one). Pure: no lookup."""
+    if not _HOST_RE.match(host):
+        return "is not a host name or IPv4 address"
+    parts = host.split(".")
+    if all(p.isdigit() for p in parts):  # numeric: must be a dotted-quad IPv4 address
+        if len(parts) != 4 or any(len(p) > 3 or int(p) > 255 for p in parts):
+            return "is not an IPv4 address (four numbers 0..255)"
+        return ""
+    labels = host[:-1].split(".") if host.endswith(".") else parts  # a trailing dot: fully qualified
+    if len(host) > 253 or any(not 1 <= len(p) <= 63 or p.startswith("-") or p.endswith("-") for p in labels):
+        return "is not a valid host name (labels of 1-63 letters, digits or '-', not starting or ending with '-')"
+    return ""
 
 
 @dataclass(frozen=True)
@@ -193,6 +238,7 @@ class LinkCounters:
     bad_signature: int = 0  # unsigned or wrongly signed frames (signing on)
     bad_data: int = 0  # CRC / framing errors
     stale_state: int = 0  # state samples that waited in the socket longer than the state timeout
+    foreign_ack: int = 0  # COMMAND_ACKs addressed to another system / component (another GCS's command)
     reader_yields: int = 0  # wake-ups that stopped at MAX_MESSAGES_PER_WAKEUP with more waiting
 
     @property
@@ -204,7 +250,8 @@ class LinkCounters:
         return (
             f"rejected {self.foreign_peer} from another address, {self.not_target} from another component, "
             f"{self.not_autopilot_heartbeat} non-autopilot HEARTBEATs, {self.bad_signature} badly signed; "
-            f"{self.bad_data} corrupt, {self.stale_state} stale state dropped, {self.reader_yields} reader yields"
+            f"{self.bad_data} corrupt, {self.stale_state} stale state dropped, {self.foreign_ack} ACKs for others ignored, "
+            f"{self.reader_yields} reader yields"
         )
 
 
@@ -286,6 +333,8 @@ class Link:
                 raise LinkError(f"signing key must be 32 bytes, got {len(signing_key)}")
             # allow_unsigned_callback None: an unsigned frame is refused like a wrongly signed one
             conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=None)
+            # the signature before the timestamp: one wrongly signed frame must not stall the stream
+            verify_signature_first(conn.mav)
         return cls(endpoint, conn, signing=signing_key is not None)
 
     # ------------------------------------------------------------------ receiving
@@ -384,9 +433,20 @@ class Link:
                 return
         if self.on_received is not None:
             self.on_received(msg)
+        if kind == "COMMAND_ACK" and not self.ack_is_ours(msg):
+            self._n["foreign_ack"] += 1  # logged, never handed on: another GCS's command was answered
+            return
         self._last_addr = addr
         if self._handler is not None:
             self._handler(msg)
+
+    def ack_is_ours(self, msg: Any) -> bool:
+        """A COMMAND_ACK answers *our* command: its target system / component are ours (0: not
+        filled in, as MAVLink 1 and old autopilots send it). PX4 and ArduPilot address each ACK to
+        the command's sender and send it on every link: one meant for another GCS must not count."""
+        system = int(getattr(msg, "target_system", 0) or 0)
+        component = int(getattr(msg, "target_component", 0) or 0)
+        return system in (0, int(self._conn.mav.srcSystem)) and component in (0, MAV_COMP_ID_ONBOARD_COMPUTER)
 
     def _from_configured_address(self, addr: Any) -> bool:
         """``udpout`` names the autopilot's address: only it may identify as the autopilot. (``udpin``

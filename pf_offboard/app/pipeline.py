@@ -36,6 +36,9 @@ class Step:
     command: Any | None  # pf_offboard.control.Command, None when the core failed
     estimate: StateEstimate
     encoded: Encoded
+    # the estimator reset this step's sample came with: the jump of the position estimate (ENU m;
+    # None: no reset), for the envelope (safety.max_estimator_reset_m)
+    estimator_reset_enu_m: Any = None
 
 
 def time_boot_ms(est: StateEstimate) -> int:
@@ -94,11 +97,13 @@ class Pipeline:
             self.follower.reset()
             events.append("compensator_reset")
         self._was_active = active
+        reset_enu_m = None
         if self.estimator.reset_pending:
             self.estimator.reset_pending = False
             self.follower.reset()  # the position may have jumped: redo the global projection
             reason = self.estimator.reset_reason
             events.append(f"estimator_reset: {reason}" if reason else "estimator_reset")
+            reset_enu_m = self.estimator.last_reset_enu_m  # None: of unknown size (a clock re-anchoring)
         stamp = time_boot_ms(est)
         try:
             if self._timed:
@@ -114,7 +119,7 @@ class Pipeline:
             self.replaced_steps += 1
             events.append(f"hold: {encoded.replaced}")
         record = self._record(est, cmd, mode, active, ";".join(events))
-        return Step(encoded.message, record, cmd, est, encoded)
+        return Step(encoded.message, record, cmd, est, encoded, reset_enu_m)
 
     def _record(self, est: StateEstimate, cmd: Any | None, mode: str, active: bool, event: str) -> StepRecord:
         if cmd is None:  # the core failed: log the state, NaN commands (the hold went out)

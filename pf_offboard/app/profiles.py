@@ -83,6 +83,9 @@ class Profile:
     refused_outputs: tuple[tuple[str, str], ...] = ()
     # HEARTBEAT custom_mode -> human-readable name
     mode_names: Callable[[int], str] = str
+    # modes only the autopilot's own failsafe (or the operator) chooses when we did not ask for them:
+    # return and land modes; never overridden by the app (see pf_offboard.app.modes)
+    failsafe_custom_modes: tuple[int, ...] = ()
 
     @property
     def name(self) -> str:
@@ -164,6 +167,8 @@ PX4 = Profile(
     offboard_mode_mask=0xFF << 16,
     params_bytewise=True,
     mode_names=px4_mode_name,
+    # AUTO.RTL, AUTO.LAND, AUTO.PRECLAND; DESCEND (main 4 sub 9 in some versions is PRECLAND)
+    failsafe_custom_modes=(px4_custom_mode(4, 5), px4_custom_mode(4, 6), px4_custom_mode(4, 9)),
 )
 
 ARDUPILOT = Profile(
@@ -180,6 +185,7 @@ ARDUPILOT = Profile(
     guid_options=(("attitude", 8), ("rates", 8), ("acceleration", 16)),
     refused_outputs=(("acceleration", _ARDUPILOT_ACCELERATION_REFUSAL),),
     mode_names=ardupilot_mode_name,
+    failsafe_custom_modes=(6, 9, 21),  # RTL, LAND, SMART_RTL
 )
 
 PROFILES: dict[str, Profile] = {"px4": PX4, "ardupilot": ARDUPILOT}

@@ -61,6 +61,27 @@ async def prepare_output(flight: Any, dialect: Any, settings: FlightSettings, al
             print(f"pf-offboard fly: warning: {line}", file=stream)
 
 
+async def check_offboard_loss(flight: Any, dialect: Any, output_mode: str, wanted: str | None, stream: TextIO) -> None:
+    """What the vehicle does if the app dies, read (and with ``wanted`` set) before any mode request:
+    one line saying it; refused (exit 2) when the motors would stop; a warning when nothing would
+    hold the vehicle's position (PX4's Return climbs to RTL_RETURN_ALT; ArduPilot attitude / rates
+    drift)."""
+    try:
+        loss = await dialect.offboard_loss(flight.params, output_mode, wanted)
+    except LinkError as exc:
+        if wanted is not None:
+            raise
+        print(f"pf-offboard fly: warning: cannot read what the vehicle does if the app stops ({exc}); see docs/safety.md", file=stream)
+        return
+    if loss.falls:
+        raise InputError("--offboard-loss", f"if the app stopped, {loss.text}; set it to hold or land (--offboard-loss hold)")
+    if loss.drifts:
+        hint = " (--offboard-loss hold sets a hold)" if wanted is None and dialect.name == "px4" else ""
+        print(f"pf-offboard fly: warning: if the app stops, {loss.text}{hint}", file=stream)
+    else:
+        print(f"pf-offboard fly: if the app stops, {loss.text}", file=stream)
+
+
 def _first_leaf(group: BaseExceptionGroup) -> BaseException:  # type: ignore[type-arg]
     first: BaseException = group
     while isinstance(first, BaseExceptionGroup):

@@ -92,6 +92,18 @@ def rate_bound(config: Any) -> float | None:
     return safety.max_body_rate_rad_s if safety is not None and safety.enabled else None
 
 
-def default_log_dir() -> Path:
+def default_log_dir(prefix: str = "") -> Path:
+    """``flights/<prefix><UTC time>``, created here and never shared: a run started in the same
+    second as another (or a directory left from one) gets ``-2``, ``-3`` ... (the directory is made
+    with an exclusive mkdir, so two concurrent runs can never write the same one)."""
     stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
-    return Path("flights") / stamp
+    base = Path("flights")
+    base.mkdir(parents=True, exist_ok=True)
+    for n in range(1, 10_000):
+        candidate = base / (f"{prefix}{stamp}" + (f"-{n}" if n > 1 else ""))
+        try:
+            candidate.mkdir()
+        except FileExistsError:
+            continue
+        return candidate
+    raise OSError(f"no free log directory name under {base} for {prefix}{stamp}")

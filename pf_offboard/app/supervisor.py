@@ -64,6 +64,12 @@ class SafetySupervisor:
         if monitor is None:
             return Verdict()
         sample = self.sample(step.estimate, step, armed, following)
+        if step.estimator_reset_enu_m is not None:
+            # the estimate jumped: following on would fly the vehicle by the jump (the path moved
+            # under it; a 1.6 m vertical reset flew one to 3 cm above the ground)
+            verdict = monitor.check_estimator(reset_enu_m=step.estimator_reset_enu_m)
+            if verdict.breach:
+                return verdict
         if not self._activation_checked:
             self._activation_checked = True
             verdict = monitor.check_activation(sample)

@@ -316,6 +316,7 @@ def excite(args: argparse.Namespace | ExciteRequest, spec: ExcitationSpec, strea
 
     request = args if isinstance(args, ExciteRequest) else ExciteRequest.from_args(args)
     endpoint = parse_endpoint(request.connect)
+    endpoint.check_local()
     config = load_config(request.config_path)
     settings = flight_settings_for(config, output=request.output)
     if request.takeoff_m is not None and not (math.isfinite(request.takeoff_m) and 0.3 <= request.takeoff_m <= 100.0):

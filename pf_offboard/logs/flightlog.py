@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import shutil
 from dataclasses import dataclass
+import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -48,28 +50,74 @@ def log_stem(path: str | Path) -> str:
     return name.rsplit(".", 1)[0] if "." in name else name
 
 
+# Each log file stops growing at this size by default (a warning says so): 250 Hz of telemetry and
+# setpoints is ~320 MB of tlog an hour; 2 GiB is over six hours of flight.
+DEFAULT_MAX_FILE_BYTES = 2 << 30
+
+
+def _stderr_warning(text: str) -> None:
+    print(f"warning: {text}", file=sys.stderr)
+
+
 class FlightLog(Closing):
     """Writers for one flight: ``with FlightLog.open(out_dir) as log: log.frame(...)``.
 
     ``frame(bytes, unix_time_s)`` logs MAVLink traffic in either direction (the direction is
     recovered from the source component, see :mod:`.tlog`); ``step(record)`` logs a
     controller step.
+
+    Flight control never depends on logging: an I/O error while writing (a full disk: ENOSPC, a
+    removed USB stick: EIO) stops that file, with one ``warn`` line naming it, and is never raised
+    to the caller (the receive callback, the keep-alive, the controller step); neither is one from
+    ``flush`` or ``close``. Each file also stops at ``max_file_bytes`` (one warning). ``errors``
+    lists what stopped a file.
     """
 
-    def __init__(self, paths: FlightLogPaths, tlog: TlogWriter, steps: StepLogWriter) -> None:
+    def __init__(
+        self, paths: FlightLogPaths, tlog: TlogWriter, steps: StepLogWriter,
+        warn: Callable[[str], None] | None = None, max_file_bytes: int = DEFAULT_MAX_FILE_BYTES,
+    ) -> None:  # fmt: skip
         self.paths = paths
-        self._tlog = tlog
-        self._steps = steps
+        self._tlog: TlogWriter | None = tlog
+        self._steps: StepLogWriter | None = steps
+        self.warn = warn if warn is not None else _stderr_warning
+        self.max_file_bytes = max_file_bytes
+        self._tlog_bytes = 0
+        self._steps_rows = 0
+        self.errors: list[str] = []
+
+    def _stop(self, which: str, why: str) -> None:
+        """Stop writing one file (closing it quietly) and warn once."""
+        writer = self._tlog if which == "tlog" else self._steps
+        if which == "tlog":
+            self._tlog = None
+        else:
+            self._steps = None
+        path = self.paths.tlog if which == "tlog" else self.paths.steps_csv
+        if writer is not None:
+            try:
+                writer.close()
+            except OSError:
+                pass
+        text = f"log {path} stopped: {why}; the flight goes on without it"
+        self.errors.append(text)
+        try:
+            self.warn(text)
+        except Exception:  # noqa: BLE001  (a broken status stream must not end the flight either)
+            pass
 
     @classmethod
-    def open(cls, out_dir: str | Path, name: str = "flight", config_path: str | Path | None = None, config: Any = None) -> FlightLog:
+    def open(
+        cls, out_dir: str | Path, name: str = "flight", config_path: str | Path | None = None, config: Any = None,
+        warn: Callable[[str], None] | None = None, max_file_bytes: int = DEFAULT_MAX_FILE_BYTES,
+    ) -> FlightLog:  # fmt: skip
         """Create the directory and files (overwriting a previous flight of the same name).
 
         ``config``: the loaded config; when its path came from a planning tool's file and was
         converted to local way-points, the copy holds those (see :meth:`write_config`)."""
         paths = FlightLogPaths.in_dir(out_dir, name)
         paths.tlog.parent.mkdir(parents=True, exist_ok=True)
-        log = cls(paths, TlogWriter.open(paths.tlog), StepLogWriter.open(paths.steps_csv))
+        log = cls(paths, TlogWriter.open(paths.tlog), StepLogWriter.open(paths.steps_csv), warn=warn, max_file_bytes=max_file_bytes)
         if config_path is not None:
             log.write_config(config_path, config)
         return log
@@ -99,14 +147,45 @@ class FlightLog(Closing):
         target.write_text(header + yaml.safe_dump(local_config_data(config, data), sort_keys=False), encoding="utf-8")
 
     def frame(self, frame_bytes: bytes | bytearray, unix_time_s: float) -> None:
-        self._tlog.write(frame_bytes, unix_time_s)
+        tlog = self._tlog
+        if tlog is None:
+            return
+        self._tlog_bytes += 8 + len(frame_bytes)
+        if self._tlog_bytes > self.max_file_bytes:
+            self._stop("tlog", f"reached its size limit ({self.max_file_bytes / 2**20:.0f} MiB)")
+            return
+        try:
+            tlog.write(frame_bytes, unix_time_s)
+        except OSError as exc:
+            self._stop("tlog", f"write failed: {exc.strerror or exc}")
 
     def step(self, record: StepRecord) -> None:
-        self._steps.write(record)
+        steps = self._steps
+        if steps is None:
+            return
+        self._steps_rows += 1
+        # a row is ~400 bytes: checked by count, not by formatting the row twice
+        if self._steps_rows * 400 > self.max_file_bytes:
+            self._stop("steps", f"reached its size limit ({self.max_file_bytes / 2**20:.0f} MiB)")
+            return
+        try:
+            steps.write(record)
+        except OSError as exc:
+            self._stop("steps", f"write failed: {exc.strerror or exc}")
 
     def flush(self) -> None:
-        self._tlog.flush()
+        if self._tlog is not None:
+            try:
+                self._tlog.flush()
+            except OSError as exc:
+                self._stop("tlog", f"write failed: {exc.strerror or exc}")
 
     def close(self) -> None:
-        self._tlog.close()
-        self._steps.close()
+        for which, writer in (("tlog", self._tlog), ("steps", self._steps)):
+            if writer is None:
+                continue
+            try:
+                writer.close()
+            except OSError as exc:
+                self._stop(which, f"write failed at close: {exc.strerror or exc}")
+        self._tlog = self._steps = None

@@ -18,10 +18,8 @@ A ``.tlog.gz`` is read transparently (offsets then count decompressed bytes).
 
 from __future__ import annotations
 
-import gzip
 import math
 import struct
-import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +46,8 @@ _MIN_STAMP_US = 315_532_800 * 1_000_000
 _MAX_STAMP_US = 7_258_118_400 * 1_000_000
 
 Direction = Literal["in", "out"]
+# A log read whole is at most this large (FlightLog bounds each file it writes to 2 GiB).
+MAX_LOG_BYTES = 2 << 30
 
 
 class LogError(InputError):
@@ -103,15 +103,15 @@ class TlogWriter(StreamWriter):
 
 def read_log_bytes(path: Path) -> bytes:
     """A log file's bytes; ``*.gz`` files are decompressed (offsets then count decompressed bytes)."""
+    from pf_offboard.inputfile import gunzip_bounded, read_bounded
+
+    name = str(path) if len(str(path)) <= 200 else str(path)[:100] + "..." + str(path)[-100:]
     try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise LogError(str(path), f"cannot read: {exc.strerror or exc}") from None
-    if path.name.endswith(".gz"):
-        try:
-            data = gzip.decompress(data)
-        except (OSError, EOFError, zlib.error) as exc:
-            raise LogError(str(path), f"not a valid gzip file: {exc}") from None
+        data = read_bounded(path, MAX_LOG_BYTES)
+        if path.name.endswith(".gz"):
+            data = gunzip_bounded(data, MAX_LOG_BYTES)
+    except ValueError as exc:
+        raise LogError(name, str(exc)) from None
     return data
 
 

@@ -53,7 +53,9 @@ class SafetyConfig:
     max_body_rate_rad_s: float = 4.0  # body-rate setpoints: roll/pitch pair and yaw (PX4 MC_ROLLRATE_MAX 220 deg/s)
     max_attitude_error_deg: float = 35.0  # rates mode: measured vs commanded thrust axis (own loop diverging) ...
     attitude_error_time_s: float = 0.5  # ... for longer than this (a step demand at activation is transient)
-    max_descent_speed_m_s: float = 5.0  # falling faster than this while following: motors lost / crash
+    max_descent_speed_m_s: float = 5.0  # falling faster than this while following: motors lost / crash ...
+    falling_confirm_s: float = 0.02  # ... on every sample for at least this long, two samples or more (never one)
+    max_estimator_reset_m: float = 0.5  # an estimator reset (position jump) larger than this while following ends it
     no_progress_s: float = 5.0  # while following: neither along-path progress nor approach for this long
     min_progress_m: float = 0.5
     safe_mode_timeout_s: float = 10.0  # retry the hold/land request until confirmed, at most this long
@@ -195,6 +197,7 @@ class Breach(enum.Enum):
     DISARMED = "disarmed"
     LANDED = "landed"
     SETPOINT = "setpoint"
+    ESTIMATOR = "estimator"  # the position estimate reset (jumped) or reports itself degraded
 
 
 CRASH_KINDS = frozenset({Breach.FALLING, Breach.DISARMED, Breach.LANDED})
@@ -256,6 +259,8 @@ class EnvelopeMonitor:
         self._window_best_cross_m = math.inf
         self.max_tilt_seen_rad = 0.0
         self._attitude_error_since_s: float | None = None
+        self._falling_since_s: float | None = None
+        self._falling_samples = 0
 
     # ------------------------------------------------------------------ activation
     def check_activation(self, sample: VehicleSample) -> Verdict:
@@ -288,7 +293,16 @@ class EnvelopeMonitor:
             return Verdict(Breach.LANDED, "the autopilot reports the vehicle on the ground (EXTENDED_SYS_STATE) while following")
         descent = -float(sample.velocity_enu_m_s[2])
         if following and descent > cfg.max_descent_speed_m_s:
-            return Verdict(Breach.FALLING, f"descending at {descent:.1f} m/s (safety.max_descent_speed_m_s {cfg.max_descent_speed_m_s:g}): falling")
+            # never on one sample: every sample over falling_confirm_s (and at least two) says so
+            if self._falling_since_s is None:
+                self._falling_since_s, self._falling_samples = sample.time_s, 0
+            self._falling_samples += 1
+            lasted = sample.time_s - self._falling_since_s
+            if self._falling_samples >= 2 and lasted >= cfg.falling_confirm_s:
+                return Verdict(Breach.FALLING, f"descending at {descent:.1f} m/s for {lasted:.2f} s (safety.max_descent_speed_m_s "
+                                               f"{cfg.max_descent_speed_m_s:g}): falling")  # fmt: skip
+        else:
+            self._falling_since_s = None
         if sample.q_enu_flu is not None:
             tilt = tilt_rad(sample.q_enu_flu)
             self.max_tilt_seen_rad = max(self.max_tilt_seen_rad, tilt)
@@ -327,6 +341,24 @@ class EnvelopeMonitor:
         if d is not None and math.isfinite(d) and d > cfg.max_path_distance_m:
             return Verdict(Breach.PATH_DISTANCE, f"{d:.2f} m from the path (safety.max_path_distance_m {cfg.max_path_distance_m:g})")
         return self._watchdog(sample)
+
+    def check_estimator(self, reset_enu_m: ArrayLike | None = None, degraded: str = "") -> Verdict:
+        """While following: an estimator reset (the confirmed jump of the position estimate, ENU m)
+        larger than ``max_estimator_reset_m`` — the path moved under the vehicle, and following on
+        would fly it there (a 1.6 m vertical reset flew a vehicle to 3 cm above the ground) — or an
+        estimate that reports itself degraded (``degraded``: why) ends following."""
+        cfg = self.config
+        if not cfg.enabled:
+            return OK
+        if degraded:
+            return Verdict(Breach.ESTIMATOR, f"position estimate degraded ({degraded})")
+        if reset_enu_m is not None:
+            jump = np.asarray(reset_enu_m, dtype=float)
+            size = float(np.linalg.norm(jump))
+            if not math.isfinite(size) or size > cfg.max_estimator_reset_m:
+                return Verdict(Breach.ESTIMATOR, f"estimator reset moved the position estimate {size:.2f} m "
+                                                 f"(vertical {float(jump[2]):+.2f} m; safety.max_estimator_reset_m {cfg.max_estimator_reset_m:g})")  # fmt: skip
+        return OK
 
     def _fence(self, sample: VehicleSample) -> Verdict:
         why = self.fence.violation(sample.position_enu_m)

@@ -269,3 +269,79 @@ def test_a_recorded_series_is_corrected_as_the_live_estimator_corrects_it() -> N
     series = position_consistent_velocity(np.array(times), np.array(pos), np.array(vel), 0.3)
     assert np.abs(series - np.array(live)).max() < 1e-9
     assert np.abs(series[-1] - (vel[-1] - np.array([0.3, -0.2, 0.1]))).max() < 0.03  # and it corrects
+
+
+# ---------------------------------------------------------------- health and plausibility (physical limits)
+def _hover_track(est: Estimator, t0_ms: int = 0, n: int = 10, dt_ms: int = 4) -> int:
+    for k in range(n):
+        assert est.on_message(local_position(t0_ms + k * dt_ms, (0.0, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    return t0_ms + (n - 1) * dt_ms
+
+
+def test_a_corrupt_sample_cannot_excuse_its_own_jump_with_its_own_speed() -> None:
+    """x = 40 m with vx = 5000 m/s: the allowed jump comes from the previous trusted speed, so it is
+    refused; the next genuine sample continues the track (the corrupt one is never confirmed)."""
+    est = Estimator()
+    t = _hover_track(est)
+    assert not est.on_message(local_position(t + 4, (40.0, 0.0, -2.0), (5000.0, 0.0, 0.0)))
+    assert est.on_message(local_position(t + 8, (0.0, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    assert est.rejected_jumps == 1 and est.position_resets == 0
+    assert est.latest.position_enu_m == pytest.approx([0.0, 0.0, 2.0])
+
+
+def test_one_impossible_velocity_is_refused() -> None:
+    """vz = +50 m/s (NED, falling) on one sample from a hover: beyond 4 g; refused, never flown."""
+    est = Estimator()
+    t = _hover_track(est)
+    assert not est.on_message(local_position(t + 4, (0.0, 0.0, -2.0), (0.0, 0.0, 50.0)))
+    assert est.on_message(local_position(t + 8, (0.0, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    assert est.latest.velocity_enu_m_s[2] == pytest.approx(0.0)
+    est2 = Estimator()
+    assert not est2.on_message(local_position(0, (0.0, 0.0, -2.0), (100.0, 0.0, 0.0)))  # even as the first sample
+
+
+def test_a_small_reset_is_accepted_but_flagged_with_its_size() -> None:
+    """A 0.6 m vertical step (inside the 1 m jump margin) is a reset all the same: flagged with its size."""
+    est = Estimator()
+    t = _hover_track(est)
+    assert est.on_message(local_position(t + 4, (0.0, 0.0, -1.4), (0.0, 0.0, 0.0)))
+    assert est.position_resets == 1 and est.reset_pending
+    assert est.last_reset_enu_m == pytest.approx([0.0, 0.0, -0.6])
+    # ordinary motion is not a reset: 2 m/s for 40 samples
+    est2 = Estimator()
+    for k in range(40):
+        assert est2.on_message(local_position(4 * k, (0.008 * k, 0.0, -2.0), (2.0, 0.0, 0.0)))
+    assert est2.position_resets == 0
+
+
+def test_odometry_quality_minus_one_is_refused() -> None:
+    est = Estimator("odometry")
+    q = (1.0, 0.0, 0.0, 0.0)
+    assert est.on_message(odometry(1000, (0, 0, -2), (0, 0, 0), q))
+    lost = odometry(2000, (0.1, 0, -2), (0.6, 0, 0), q)
+    lost.quality = -1
+    assert not est.on_message(lost)
+    assert est.rejected_unhealthy == 1 and "quality -1" in est.last_event
+
+
+def test_estimator_reports_degrade_only_when_confirmed_and_recover() -> None:
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    good = mavlink2.MAVLink_estimator_status_message(0, 1 | 2 | 4 | 8 | 16 | 32, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1)
+    glitch = mavlink2.MAVLink_estimator_status_message(0, 1 | 2 | 4 | 8 | 32 | 1024, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1)
+    from pymavlink.dialects.v20 import ardupilotmega
+
+    ekf_bad = ardupilotmega.MAVLink_ekf_status_report_message(1 | 2 | 4 | 8 | 32, 1.5, 0.2, 0.2, 0.1, 0.1)
+    est = Estimator()
+    t = _hover_track(est)
+    est.on_message(glitch)  # one bad report: no verdict
+    assert est.health_reason == "" and est.on_message(local_position(t + 4, (0.0, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    est.on_message(glitch)
+    assert "GPS glitch" in est.health_reason
+    assert not est.on_message(local_position(t + 8, (0.0, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    assert est.rejected_unhealthy == 1
+    est.on_message(good)
+    assert est.health_reason == "" and est.on_message(local_position(t + 12, (0.0, 0.0, -2.0), (0.0, 0.0, 0.0)))
+    est.on_message(ekf_bad)
+    est.on_message(ekf_bad)
+    assert "velocity_variance 1.50" in est.health_reason

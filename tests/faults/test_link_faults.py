@@ -62,6 +62,7 @@ def test_spoofed_takeover_heartbeat_and_position_from_another_port_change_nothin
 def _key_file(tmp_path, name: str, text: str) -> str:
     path = tmp_path / name
     path.write_text(text + "\n")
+    path.chmod(0o600)  # key files are checked like ssh keys: owner only
     return str(path)
 
 

@@ -73,13 +73,36 @@ def test_state_inside_the_envelope_is_ok_and_each_limit_breaches() -> None:
         (sample(q=about_x(61.0)), Breach.TILT),
         (sample(armed=False), Breach.DISARMED),
         (sample(landed=1), Breach.LANDED),
-        (sample(vel=(0.0, 0.0, -5.5)), Breach.FALLING),
     ]
     for s, kind in cases:
         verdict = monitor().check_state(s)
         assert verdict.kind is kind, (kind, verdict)
         assert verdict.reason and "\n" not in verdict.reason
     assert monitor().check_state(sample(armed=False)).crash and not monitor().check_state(sample(cross=3.5)).crash
+
+
+def test_falling_is_never_decided_on_one_sample() -> None:
+    """One sample claiming 50 m/s down is no verdict; descending beyond the limit on every sample
+    for safety.falling_confirm_s (two samples at least) is; a good sample in between starts again."""
+    m = monitor()
+    assert not m.check_state(sample(t=0.0, vel=(0.0, 0.0, -50.0))).breach
+    assert not m.check_state(sample(t=0.004)).breach
+    assert not m.check_state(sample(t=0.008, vel=(0.0, 0.0, -5.5))).breach
+    assert not m.check_state(sample(t=0.02, vel=(0.0, 0.0, -5.5))).breach  # 0.012 s
+    verdict = m.check_state(sample(t=0.03, vel=(0.0, 0.0, -5.5)))
+    assert verdict.kind is Breach.FALLING and verdict.crash and "for 0.02 s" in verdict.reason
+    slow = monitor(falling_confirm_s=0.5)  # one sample 0.6 s after the first is still two samples
+    assert not slow.check_state(sample(t=0.0, vel=(0.0, 0.0, -6.0))).breach
+    assert slow.check_state(sample(t=0.6, vel=(0.0, 0.0, -6.0))).kind is Breach.FALLING
+
+
+def test_estimator_resets_and_degraded_estimates_end_following() -> None:
+    m = monitor()
+    assert not m.check_estimator(reset_enu_m=(0.0, 0.3, -0.3)).breach  # 0.42 m: followed on
+    v = m.check_estimator(reset_enu_m=(0.0, 0.0, -1.6))
+    assert v.kind is Breach.ESTIMATOR and not v.crash and "1.60 m" in v.reason and "vertical -1.60" in v.reason
+    assert m.check_estimator(degraded="ODOMETRY quality -1").kind is Breach.ESTIMATOR
+    assert not monitor(enabled=False).check_estimator(reset_enu_m=(9.0, 0.0, 0.0)).breach
 
 
 def test_not_following_only_crash_and_tilt_count() -> None:

@@ -6,7 +6,7 @@ import math
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from pf_offboard.app.dialects.base import Dialect, TakeoffOps
+from pf_offboard.app.dialects.base import Dialect, OffboardLoss, TakeoffOps
 from pf_offboard.app.params import Parameters
 from pf_offboard.app.profiles import ARDUPILOT
 from pf_offboard.errors import InputError
@@ -50,3 +50,18 @@ class ArduPilotDialect(Dialect):
             return [f"ArduPilot jerk-limits acceleration targets (PSC_JERK_XY/Z = {jerk:g} m/s^3): "
                     "expect lag and, at high gains, oscillation; raise PSC_JERK_XY/Z or use --output rates"]  # fmt: skip
         return []
+
+    async def offboard_loss(self, params: Parameters, output_mode: str, wanted: str | None) -> OffboardLoss:
+        """ArduPilot stays in GUIDED when the targets stop: after GUID_TIMEOUT an acceleration /
+        velocity target is dropped and it brakes to a hover; an attitude / rate target is replaced by
+        level flight at constant altitude, which does not brake: the vehicle drifts (12 m in 20 s
+        measured after the app was killed). No parameter makes it change mode: ``wanted`` is refused
+        for attitude / rates."""
+        timeout = await params.read("GUID_TIMEOUT")
+        if output_mode == "acceleration":
+            return OffboardLoss(f"ArduPilot keeps GUIDED; after GUID_TIMEOUT {timeout:g} s it brakes to a hover", drifts=False)
+        text = (f"ArduPilot keeps GUIDED; after GUID_TIMEOUT {timeout:g} s it levels and holds altitude but does not brake: "
+                "the vehicle drifts until a pilot or ground station takes over")  # fmt: skip
+        if wanted is not None:
+            raise InputError("--offboard-loss", f"{wanted} cannot be configured on ArduPilot with --output {output_mode}: {text}")
+        return OffboardLoss(text, drifts=True)

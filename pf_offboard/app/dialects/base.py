@@ -95,3 +95,18 @@ class Dialect:
         """Warnings about how this autopilot will fly ``output_mode`` (parameters read)."""
         return []
 
+    async def offboard_loss(self, params: Parameters, output_mode: str, wanted: str | None) -> OffboardLoss:
+        """What the vehicle does if the app dies (its setpoints stop): read at connect, and with
+        ``wanted`` ("hold" / "land") set where the autopilot can be told (InputError where it cannot)."""
+        return OffboardLoss("unknown for this autopilot", drifts=False)
+
+
+class OffboardLoss:
+    """What the autopilot does when our setpoints stop: ``text`` for the user; ``drifts``: the
+    vehicle is left flying with nothing holding its position; ``falls``: it stops its motors."""
+
+    def __init__(self, text: str, drifts: bool, falls: bool = False) -> None:
+        self.text = text
+        self.drifts = drifts
+        self.falls = falls
+
