@@ -16,6 +16,13 @@ from pf_offboard.errors import InputError
 
 GRAVITY_M_S2 = 9.81  # the paper's g
 MIN_THRUST_FLOOR_M_S2 = 0.5  # lowest allowed min_thrust_m_s2 (attitude needs |f| > 0)
+DEFAULT_SPEED_M_S = 1.0  # eta2_ref when none is given (PathFollower and a config without speed_m_s)
+# body-rate feed-forward: on_path (the paper, eqs. 25-28) | any_state (docs/controller.md § 3b)
+FEEDFORWARD_MODES = ("on_path", "any_state")
+ANY_STATE_NEEDS_NO_COMPENSATION = (
+    "any_state needs compensation.enabled: false (with the inner-loop compensation the lag lead "
+    "replaces the roll/pitch body-rate feed-forward)"
+)
 
 
 def _finite(name: str, value: float) -> float:
@@ -27,17 +34,29 @@ def _finite(name: str, value: float) -> float:
 
 @dataclass(frozen=True)
 class Gains:
-    """Loop gains as bandwidth [Hz] and damping ratio (the paper: 6 Hz / 0.7 and 4 Hz / 0.8).
+    """Loop gains as bandwidth [Hz] and damping ratio.
+
+    The defaults are what ``gains: auto`` derives for :meth:`VehicleModel.typical` (a typical PX4 /
+    ArduPilot inner loop: lag 0.1 s, delay 0.1 s) with the default :class:`Compensation`'s phase
+    margins (``pf_offboard.control.tuning.gains_for_vehicle``; a test keeps them equal). The
+    paper's 6 Hz / 0.7 and 4 Hz / 0.8 are :meth:`paper`: they need an ideal inner loop.
 
     Transversal (xi, phi): ``u = -kp e - kd e_dot`` with ``w = 2 pi f``, ``kp = w^2``,
     ``kd = 2 zeta w``. Tangential: velocity loop ``u_eta = kd_t (eta2_ref - eta2)``,
     ``kd_t = 2 zeta_t w_t`` (see docs/controller.md).
     """
 
-    transversal_bandwidth_hz: float = 6.0
-    transversal_damping: float = 0.7
-    tangential_bandwidth_hz: float = 4.0
-    tangential_damping: float = 0.8
+    transversal_bandwidth_hz: float = 0.927
+    transversal_damping: float = 1.0
+    tangential_bandwidth_hz: float = 1.475
+    tangential_damping: float = 1.0
+
+    @classmethod
+    def paper(cls) -> Gains:
+        """The paper's gains (6 Hz / 0.7 transversal, 4 Hz / 0.8 tangential). They assume the
+        paper's ideal inner loop (an acceleration flown at once); on a real PX4 / ArduPilot inner
+        loop they leave a negative phase margin and limit-cycle."""
+        return cls(6.0, 0.7, 4.0, 0.8)
 
     def __post_init__(self) -> None:
         for name in ("transversal_bandwidth_hz", "transversal_damping", "tangential_bandwidth_hz", "tangential_damping"):
@@ -198,6 +217,35 @@ class VehicleModel:
             if not lo <= v <= hi:
                 raise InputError(f"vehicle.{name}", f"must be in [{lo:g}, {hi:g}], got {v:g}")
             object.__setattr__(self, name, v)
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """Inner-loop compensation settings (:class:`~pf_offboard.control.compensator.InnerLoopCompensator`:
+    disturbance observer + delay predictor + gain/drag inversion + integral action, from a
+    :class:`VehicleModel`), and the phase margins ``gains: auto`` keeps on that model.
+
+    The defaults are the shipped choice (the ``compensation:`` section's defaults too).
+    ``Compensation.off()``: the paper's law as published (no observer, predictor or integral).
+    """
+
+    enabled: bool = True
+    observer_rad_s: float = 8.0  # disturbance-observer poles (rad/s)
+    integral_rad_s: float = 1.0  # integral action on speed and transversal offsets (rad/s)
+    phase_margin_deg: float = 30.0  # transversal loops, for gains: auto
+    tangential_phase_margin_deg: float = 40.0  # the speed loop's, for gains: auto
+
+    def __post_init__(self) -> None:
+        for name, lo, hi in (("observer_rad_s", 0.0, 50.0), ("integral_rad_s", 0.0, 10.0),
+                             ("phase_margin_deg", 10.0, 80.0), ("tangential_phase_margin_deg", 10.0, 80.0)):  # fmt: skip
+            v = _finite(f"compensation.{name}", getattr(self, name))
+            if not lo <= v <= hi:
+                raise InputError(f"compensation.{name}", f"must be in [{lo:g}, {hi:g}], got {v:g}")
+
+    @classmethod
+    def off(cls) -> Compensation:
+        """No compensation: the paper's stateless law (for an ideal inner loop)."""
+        return cls(enabled=False)
 
 
 YAW_MODES = ("constant", "tangent", "table")
