@@ -284,7 +284,11 @@ class PathFollower:
             raise InputError("feedforward", ANY_STATE_NEEDS_NO_COMPENSATION)
         self.feedforward = feedforward
         # eta2_ref(eta1) from a speed profile (None: the constant ``speed``, as in the paper)
-        self.profile = SpeedProfile(path, speed_profile, self.limits, speed) if speed_profile is not None else None
+        # planned for the inner loop's response (lag + delay of the vehicle model; the paper's ideal
+        # loop: 0): a slower loop plans lower accelerations
+        response_s = max(self.vehicle.accel_lag_xy_s, self.vehicle.accel_lag_z_s) + self.vehicle.accel_delay_s
+        self.profile = (SpeedProfile(path, speed_profile, self.limits, speed, response_s)
+                        if speed_profile is not None else None)  # fmt: skip
         self._yaw = YawProfile(self.yaw, path.length_m, path.closed, speed)
         self._closed = bool(path.closed)
         self._lam_max = float(path.lam_max)

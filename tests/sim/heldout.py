@@ -26,10 +26,10 @@ def tilted_figure_eight() -> list[list[float]]:
 
 
 def helix() -> list[list[float]]:
-    """Open helix, radius 1.2 m, 1.5 turns climbing 1.2 m (a path with torsion)."""
-    n = 13
-    return [[round(1.2 * math.cos(1.5 * 2 * math.pi * i / (n - 1)), 4), round(1.2 * math.sin(1.5 * 2 * math.pi * i / (n - 1)), 4),
-             round(1.8 + 1.2 * i / (n - 1), 4)] for i in range(n)]  # fmt: skip
+    """Open helix, radius 1.3 m, 3 turns climbing 1.8 m (a path with torsion, 25 m long)."""
+    n, turns = 25, 3.0
+    return [[round(1.3 * math.cos(turns * 2 * math.pi * i / (n - 1)), 4), round(1.3 * math.sin(turns * 2 * math.pi * i / (n - 1)), 4),
+             round(1.6 + 1.8 * i / (n - 1), 4)] for i in range(n)]  # fmt: skip
 
 
 def racetrack() -> list[list[float]]:

@@ -93,6 +93,9 @@ def truth_metrics(f: TruthFlight, settle_s: float = 8.0, end_s: float | None = N
     v_t = np.einsum("ij,ij->i", v, tan)
     t_end = t[-1] - DIFF_S if end_s is None else min(end_s, t[-1] - DIFF_S)
     win = (t >= f.activation_s + settle_s) & (t <= t_end) & np.isfinite(v_t)
+    if not f.path.closed:  # an open path: while the reference is the nominal one (not the stop at its end)
+        nominal = np.max(np.abs(f.speed_ref_m_s))
+        win &= np.abs(f.speed_ref_m_s) >= nominal - 1e-9
     e = v_t[win] - f.speed_ref_m_s[win]
     duration = float(t[win][-1] - t[win][0]) if win.any() else 0.0
     eta1 = np.array([f.path.arclength(float(x)) for x in lam[win]])
