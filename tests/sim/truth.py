@@ -35,12 +35,15 @@ class TruthMetrics:
     tangential_saturated_share: float  # of the window's steps
     window_s: float
     crashed: bool
+    estimate_cross_track_rms_m: float = math.nan  # the controller's view: the estimate's distance to the path
+    estimate_error_rms_m: float = math.nan  # |estimate - truth|, RMS
 
 
 @dataclass
 class TruthFlight:
     time_s: np.ndarray  # (N,) s, control steps while following
     position_enu_m: np.ndarray  # (N, 3) the true position
+    estimate_enu_m: np.ndarray  # (N, 3) the position the controller was given
     speed_ref_m_s: np.ndarray  # (N,) eta2_ref the controller tracked
     tangential_saturated: np.ndarray  # (N,) bool
     activation_s: float
@@ -55,6 +58,7 @@ def fly_truth(config: str | FsPath, spec: SimSpec, out_dir: str | FsPath,
     if patch is not None:
         patch(flight)
     rows: list[tuple[float, float, float, float, float, bool]] = []
+    est: list[tuple[float, float, float]] = []
     orig_add = flight.summary.add
 
     def add(record: Any) -> None:
@@ -63,11 +67,13 @@ def fly_truth(config: str | FsPath, spec: SimSpec, out_dir: str | FsPath,
             p = frames.ned_to_enu(flight.autopilot.truth.position_ned_m)
             rows.append((flight.autopilot.time_s, float(p[0]), float(p[1]), float(p[2]), record.speed_ref_m_s,
                          bool(record.sat_tangential)))  # fmt: skip
+            e = flight.pipeline.estimator.latest.position_enu_m
+            est.append((float(e[0]), float(e[1]), float(e[2])))
 
     flight.summary.add = add  # type: ignore[method-assign]
     flight.run()
     a = np.array([r[:5] for r in rows]) if rows else np.zeros((0, 5))
-    return TruthFlight(a[:, 0], a[:, 1:4], a[:, 4], np.array([r[5] for r in rows], dtype=bool),
+    return TruthFlight(a[:, 0], a[:, 1:4], np.array(est).reshape(-1, 3), a[:, 4], np.array([r[5] for r in rows], dtype=bool),
                        float(a[0, 0]) if len(a) else math.nan, bool(flight.autopilot.truth.crashed), flight.path)  # fmt: skip
 
 
@@ -116,4 +122,13 @@ def truth_metrics(f: TruthFlight, settle_s: float = 8.0, end_s: float | None = N
         tangential_saturated_share=float(np.mean(f.tangential_saturated[win])),
         window_s=duration,
         crashed=f.crashed,
+        estimate_cross_track_rms_m=_estimate_cross_track_rms(f, win),
+        estimate_error_rms_m=float(np.sqrt(np.mean(np.sum((f.estimate_enu_m[win] - f.position_enu_m[win]) ** 2, axis=1)))),
     )
+
+
+def _estimate_cross_track_rms(f: TruthFlight, win: np.ndarray) -> float:
+    proj = Projector(f.path)
+    pts = f.estimate_enu_m[win]
+    d = [float(np.linalg.norm(p - f.path.eval(float(proj.update(p))).sigma)) for p in pts]
+    return float(np.sqrt(np.mean(np.square(d))))
