@@ -124,7 +124,7 @@ class Limits:
     inner loop).
     """
 
-    max_tilt_deg: float = 35.0
+    max_tilt_deg: float = 45.0  # PX4 MPC_TILTMAX_AIR default; the shipped configs flew 45-50 on both real SITLs
     min_thrust_m_s2: float = 2.0
     max_thrust_m_s2: float = 20.0
     max_approach_speed_m_s: float = 2.0
