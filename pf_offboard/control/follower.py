@@ -1,7 +1,8 @@
 """PathFollower: projection -> exact transverse coordinates -> TFL with limits -> feed-forward.
 
-Pure and I/O-free; the only state is the projector's warm start (time-invariant control law).
-World ENU z up, body FLU.
+Pure and I/O-free (it never reads a file or a config: :meth:`PathFollower.from_config` takes a loaded
+one). The law is time-invariant; the state is the projector's warm start, the start ramp's origin
+and, with the inner-loop compensation, the compensator's. World ENU z up, body FLU.
 """
 
 from __future__ import annotations

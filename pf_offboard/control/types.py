@@ -115,13 +115,13 @@ class Limits:
     near the path the paper's linear laws act unchanged. Choose about 1/3-1/2 of what the vehicle
     really slews. ``None``: no shaping (the paper's laws everywhere; ideal inner loop only).
 
-    ``max_tangential_accel_m_s2`` bounds the tangential (speed) loop's correction ``|u_eta|``
-    (m/s², a feed-forward such as a speed profile's comes on top): how hard the vehicle may speed
-    up or brake to reach eta2_ref. Without it a vehicle at rest on the path starts along it with
-    the whole tilt budget at once: a 46-50 deg tilt command at 1.5 m/s on the figure-eight, which
-    tripped the tilt watchdog on a real ArduCopter SITL (so did 3 m/s²; 1.5 flew it). Stateless,
-    so the law stays time-invariant and the path invariant. ``None``: no bound (the paper's ideal
-    inner loop).
+    ``max_tangential_accel_m_s2`` is the start ramp's acceleration: after activation (``reset()``)
+    the reference speed rises from the speed along the path at this rate over the distance
+    travelled, with its feed-forward, the speed loop's correction bounded by it meanwhile; once the
+    reference is reached the speed loop is never bounded (a static bound fought the steady state:
+    PX4 SIH's drag at 1.5 m/s equals 1.5 m/s^2). An unramped start from rest leans 38 deg at
+    1.5 m/s, which tripped the tilt watchdog on a real ArduCopter SITL. ``None``: no ramp (the
+    paper's ideal inner loop).
     """
 
     max_tilt_deg: float = 45.0  # PX4 MPC_TILTMAX_AIR default; the shipped configs flew 45-50 on both real SITLs
