@@ -126,5 +126,5 @@ def test_fast_flight_with_a_speed_profile(tmp_path, monkeypatch, path, vehicle, 
     response, so the tangential loop is not saturated and the vehicle stays near the path."""
     m = _fly(tmp_path, monkeypatch, path, 1.5, vehicle, mode, exact_estimate=vehicle == "px4-sih", profile=3.0, duration_s=25.0)
     assert m.cross_track_rms_m <= 0.06 and m.cross_track_max_m <= 0.12
-    assert m.mean_speed_m_s >= 2.1 and m.tangential_saturated_share <= 0.05
+    assert m.mean_speed_m_s >= 2.4 and m.tangential_saturated_share <= 0.05  # measured 2.52-2.69 m/s
     assert math.isfinite(m.lap_time_s)
