@@ -4,7 +4,7 @@ The pure core is importable without any I/O::
 
     from pf_offboard import Path, PathFollower
     follower = PathFollower(Path.from_waypoints(points, closed=True), speed=1.5)
-    cmd = follower.update(position_enu_m, velocity_enu_m_s)
+    cmd = follower.update(position_enu_m, velocity_enu_m_s, time_s=t)
 
 A companion program flies a vehicle with the asyncio API (docs/api.md)::
 
@@ -34,6 +34,8 @@ _EXPORTS: dict[str, str] = {
     "Saturation": "pf_offboard.control",
     "Gains": "pf_offboard.control",
     "Limits": "pf_offboard.control",
+    "Compensation": "pf_offboard.control",
+    "VehicleModel": "pf_offboard.control",
     "YawSpec": "pf_offboard.control",
     "Config": "pf_offboard.config",
     "load_config": "pf_offboard.config",
@@ -58,6 +60,9 @@ __all__ = sorted(_EXPORTS)
 if TYPE_CHECKING:
     from pf_offboard.api import FollowResult, Progress, Vehicle, connect
     from pf_offboard.config import Config, load_config, parse_config
+    from pf_offboard.control import (
+        Command, Compensation, Gains, Limits, PathFollower, Saturation, TransverseState, VehicleModel, YawSpec,
+    )  # fmt: skip
     from pf_offboard.errors import (
         AutopilotFailsafe,
         CommandRefused,
@@ -69,7 +74,6 @@ if TYPE_CHECKING:
         LinkLost,
         OperatorTakeover,
     )
-    from pf_offboard.control import Command, Gains, Limits, PathFollower, Saturation, TransverseState, YawSpec
     from pf_offboard.path import Path, Projector
 
 

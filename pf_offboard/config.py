@@ -16,9 +16,19 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from pf_offboard.control.follower import FEEDFORWARD_MODES
 from pf_offboard.control.profile import SpeedProfileSpec
-from pf_offboard.control.types import GRAVITY_M_S2, MIN_THRUST_FLOOR_M_S2, Gains, Limits, VehicleModel, YawSpec
+from pf_offboard.control.types import (
+    ANY_STATE_NEEDS_NO_COMPENSATION,
+    DEFAULT_SPEED_M_S,
+    FEEDFORWARD_MODES,
+    GRAVITY_M_S2,
+    MIN_THRUST_FLOOR_M_S2,
+    Compensation,
+    Gains,
+    Limits,
+    VehicleModel,
+    YawSpec,
+)
 from pf_offboard.errors import ConfigError, InputError
 from pf_offboard.frames import ned_to_enu, yaw_ned_to_enu, yaw_rate_ned_to_enu
 from pf_offboard.safety.envelope import ACTIONS as SAFETY_ACTIONS
@@ -104,28 +114,21 @@ class FlightConfig:
 VELOCITY_CORRECTION_RANGE_S = (0.05, 60.0)
 
 
-@dataclass(frozen=True)
-class CompensationConfig:
-    """Inner-loop compensation (pf_offboard.control.compensator): observer + delay predictor +
-    gain/drag inversion + integral action, from the ``vehicle:`` model."""
-
-    enabled: bool = True
-    observer_rad_s: float = 8.0  # disturbance-observer poles (rad/s)
-    integral_rad_s: float = 1.0  # integral action on speed and transversal offsets (rad/s)
-    phase_margin_deg: float = 30.0  # for gains: auto (pf_offboard.control.tuning)
-    tangential_phase_margin_deg: float = 40.0  # the speed loop's, for gains: auto
+# The ``compensation:`` section is the core's Compensation: one set of defaults for the config
+# and for PathFollower(path, speed).
+CompensationConfig = Compensation
 
 
 @dataclass(frozen=True)
 class Config:
     path: PathConfig
-    speed_m_s: float = 1.0
+    speed_m_s: float = DEFAULT_SPEED_M_S
     gains: Gains = field(default_factory=Gains)
     yaw: YawSpec = field(default_factory=YawSpec)
     limits: Limits = field(default_factory=Limits)
     flight: FlightConfig = field(default_factory=FlightConfig)
     vehicle: VehicleModel = field(default_factory=VehicleModel.typical)
-    compensation: CompensationConfig = field(default_factory=CompensationConfig)
+    compensation: Compensation = field(default_factory=Compensation)
     gains_auto: bool = False  # gains derived from the vehicle model (gains: auto or no gains section)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     source: str = "<config>"
@@ -469,10 +472,10 @@ def _flight(data: Any) -> FlightConfig:
     )
 
 
-def _compensation(data: Any) -> CompensationConfig:
+def _compensation(data: Any) -> Compensation:
     d = _section(data, "compensation", ("enabled", "observer_rad_s", "integral_rad_s", "phase_margin_deg", "tangential_phase_margin_deg"))
-    c = CompensationConfig()
-    return CompensationConfig(
+    c = Compensation()
+    return Compensation(
         enabled=_bool(d, "enabled", "compensation.enabled", c.enabled),
         observer_rad_s=_number(d, "observer_rad_s", "compensation.observer_rad_s", c.observer_rad_s, 0.0, 50.0),  # type: ignore[arg-type]
         integral_rad_s=_number(d, "integral_rad_s", "compensation.integral_rad_s", c.integral_rad_s, 0.0, 10.0),  # type: ignore[arg-type]
@@ -596,7 +599,7 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
         raise ConfigError("path", "missing (required section); the config is empty")
     base_dir = os.path.dirname(source) if os.path.isfile(source) else None
     path = _path(d.get("path"), base_dir)
-    speed = _number(d, "speed_m_s", "speed_m_s", 1.0, -MAX_SPEED_M_S, MAX_SPEED_M_S)
+    speed = _number(d, "speed_m_s", "speed_m_s", DEFAULT_SPEED_M_S, -MAX_SPEED_M_S, MAX_SPEED_M_S)
     assert speed is not None
     if abs(speed) < MIN_SPEED_M_S:
         raise ConfigError("speed_m_s", f"must be non-zero, |speed| >= {MIN_SPEED_M_S:g} m/s (its sign picks the direction of travel), got {speed:g}")
@@ -621,8 +624,6 @@ def parse_config(data: Any, source: str = "<config>") -> Config:
             raise ConfigError("speed_profile.table", f"eta1 values must span less than one lap ({length:.3f} m) on a closed path")
     feedforward = _choice(d, "feedforward", "feedforward", "on_path", FEEDFORWARD_MODES)
     if feedforward == "any_state" and compensation.enabled:
-        from pf_offboard.control.follower import ANY_STATE_NEEDS_NO_COMPENSATION
-
         raise ConfigError("feedforward", ANY_STATE_NEEDS_NO_COMPENSATION)
     return Config(
         path=path,

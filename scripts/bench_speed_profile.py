@@ -88,7 +88,7 @@ _LEN: dict[Path, float] = {}
 
 def _length(config: Path) -> float:
     if config not in _LEN:
-        _LEN[config] = PathFollower.from_config(config).path.length_m
+        _LEN[config] = PathFollower.from_config(load_config(config)).path.length_m
     return _LEN[config]
 
 

@@ -52,7 +52,8 @@ def test_defaults_for_everything_but_the_path():
     )
     # the speed loop has its own margin (40°) and is not capped at the transversal bandwidth
     assert cfg.gains.tangential_bandwidth_hz > cfg.gains.transversal_bandwidth_hz
-    assert 0.3 < cfg.gains.transversal_bandwidth_hz < Gains().transversal_bandwidth_hz / 3
+    assert 0.3 < cfg.gains.transversal_bandwidth_hz < Gains.paper().transversal_bandwidth_hz / 3
+    assert cfg.gains == Gains()  # one source of truth: the core's defaults are the config's
     assert cfg.compensation.enabled
     assert cfg.limits == Limits()
     assert cfg.flight == FlightConfig()

@@ -147,7 +147,8 @@ class Pipeline:
             phi1_m=float(st.phi1),
             phi2_m_s=float(st.phi2),
             cross_track_m=float(cmd.cross_track_m),
-            speed_ref_m_s=float(cmd.eta2_ref_m_s) if self._profiled else self.speed_ref_m_s,
+            # the reference the law tracked this step (a speed profile's, the start ramp's)
+            speed_ref_m_s=float(cmd.eta2_ref_m_s) if math.isfinite(cmd.eta2_ref_m_s) else self.speed_ref_m_s,
             accel_cmd_enu_m_s2=np.asarray(cmd.acceleration, dtype=float),
             thrust_cmd_m_s2=float(cmd.thrust),
             q_cmd_enu_flu=np.asarray(cmd.attitude, dtype=float),

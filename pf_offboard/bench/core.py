@@ -25,7 +25,9 @@ def _follower() -> Any:
     from pf_offboard.config import parse_config
 
     if PAPER_YAML.exists():
-        return PathFollower.from_config(PAPER_YAML)
+        from pf_offboard.config import load_config
+
+        return PathFollower.from_config(load_config(PAPER_YAML))
     # installed without the repository's configs/: the same path, inline
     data = {
         "path": {
@@ -53,7 +55,9 @@ def run(quick: bool = False) -> dict[str, Any]:
     if px4.exists():
         from pf_offboard import PathFollower
 
-        comp = _run(PathFollower.from_config(px4), quick, timed=True)
+        from pf_offboard.config import load_config
+
+        comp = _run(PathFollower.from_config(load_config(px4)), quick, timed=True)
         out.update({f"compensated_{k}": v for k, v in comp.items() if k.startswith("update_m")})
     return out
 

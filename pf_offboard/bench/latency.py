@@ -33,6 +33,7 @@ def _vehicle(conn: Connection, samples: int, warmup: int) -> None:
 
     from pf_offboard import frames
     from pf_offboard.app.demo import paper_config
+    from pf_offboard.config import load_config
     from pf_offboard.control import PathFollower
 
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -40,7 +41,7 @@ def _vehicle(conn: Connection, samples: int, warmup: int) -> None:
     conn.send(sock.getsockname()[1])
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
     mav.robust_parsing = True
-    path = PathFollower.from_config(paper_config()).path
+    path = PathFollower.from_config(load_config(paper_config())).path
     sock.settimeout(10.0)
     try:
         _, app_addr = sock.recvfrom(65536)  # the app's first HEARTBEAT tells us where it is
@@ -91,13 +92,14 @@ async def _app(port: int, samples: int, in_app: list[float]) -> None:
     from pf_offboard.app.phases import Phase
     from pf_offboard.app.rules import EndSpec
     from pf_offboard.app.demo import paper_config
+    from pf_offboard.config import load_config
     from pf_offboard.app.encoders import Encoder
     from pf_offboard.app.link import Link, parse_endpoint
     from pf_offboard.app.pipeline import Pipeline
     from pf_offboard.app.profiles import PX4
     from pf_offboard.control import PathFollower
 
-    follower = PathFollower.from_config(paper_config())  # before connecting: no backlog
+    follower = PathFollower.from_config(load_config(paper_config()))  # before connecting: no backlog
     link = Link.open(parse_endpoint(f"udpout:127.0.0.1:{port}"))
     try:
         target = await link.wait_heartbeat(10.0)

@@ -16,6 +16,7 @@ from pf_offboard.control.transverse import ExactTerms, exact_terms
 from pf_offboard.control.types import (
     GRAVITY_M_S2,
     Command,
+    Compensation,
     Gains,
     Limits,
     Saturation,
@@ -30,6 +31,7 @@ __all__ = [
     "AttitudeRates",
     "GRAVITY_M_S2",
     "Command",
+    "Compensation",
     "ExactTerms",
     "Gains",
     "Limits",

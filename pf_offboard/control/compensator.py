@@ -36,7 +36,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 
-from pf_offboard.control.types import GRAVITY_M_S2, VehicleModel
+from pf_offboard.control.types import GRAVITY_M_S2, Compensation, VehicleModel
 from pf_offboard.errors import InputError
 
 Vec = tuple[float, float, float]
@@ -55,10 +55,10 @@ class InnerLoopCompensator:
         self,
         model: VehicleModel,
         *,
-        observer_rad_s: float = 4.0,
+        observer_rad_s: float = Compensation.observer_rad_s,
         max_disturbance_m_s2: float = 4.0,
-        speed_integral_rad_s: float = 1.0,
-        offset_integral_rad_s: float = 1.0,
+        speed_integral_rad_s: float = Compensation.integral_rad_s,
+        offset_integral_rad_s: float = Compensation.integral_rad_s,
         max_speed_offset_m_s: float = 0.3,
         max_position_offset_m: float = 0.1,
     ) -> None:

@@ -1,14 +1,16 @@
 """PathFollower: projection -> exact transverse coordinates -> TFL with limits -> feed-forward.
 
-Pure and I/O-free; the only state is the projector's warm start (time-invariant control law).
-World ENU z up, body FLU.
+Pure and I/O-free (it never reads a file or a config: :meth:`PathFollower.from_config` takes a loaded
+one). The law is time-invariant; the state is the projector's warm start, the start ramp's origin
+and, with the inner-loop compensation, the compensator's. World ENU z up, body FLU.
 """
 
 from __future__ import annotations
 
 import math
 import os
-from typing import TYPE_CHECKING, Any, NamedTuple
+import warnings
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -24,20 +26,25 @@ from pf_offboard.control.feedforward import (
 from pf_offboard.control.law import BISECTION_STEPS, ControlLaw, LawOutput
 from pf_offboard.control.profile import SpeedProfile, SpeedProfileSpec
 from pf_offboard.control.transverse import ExactTerms, exact_terms
+from pf_offboard.control.tuning import gains_for_vehicle
 from pf_offboard.control.types import (
+    ANY_STATE_NEEDS_NO_COMPENSATION,
+    DEFAULT_SPEED_M_S,
+    FEEDFORWARD_MODES,
     GRAVITY_M_S2,
     Command,
+    Compensation,
     Gains,
     Limits,
     Saturation,
     TransverseState,
+    VehicleModel,
     YawSpec,
 )
 from pf_offboard.errors import InputError
 from pf_offboard.frames import wrap_pi
 
 if TYPE_CHECKING:
-    from pf_offboard.config import Config
     from pf_offboard.path import Path
 
 G = GRAVITY_M_S2
@@ -62,11 +69,29 @@ FAR_OUTER_M = 1.0
 ANY_STATE_STEP_S = 5e-5
 FINE_BISECTION_STEPS = 40
 ANY_STATE_MAX_JERK_RATIO = 50.0
-FEEDFORWARD_MODES = ("on_path", "any_state")
-ANY_STATE_NEEDS_NO_COMPENSATION = (
-    "any_state needs compensation.enabled: false (with the inner-loop compensation the lag lead "
-    "replaces the roll/pitch body-rate feed-forward)"
+# Start ramp (limits.max_tangential_accel_m_s2): its feed-forward fades out over its last RAMP_END_S
+# seconds (no acceleration step where it ends); within RAMP_DONE_M_S of the reference it is done.
+RAMP_END_S = 0.3
+RAMP_DONE_M_S = 1e-3
+PAPER_WARNING = (
+    "PathFollower.paper: the paper's gains (6 Hz / 4 Hz) and law without inner-loop compensation "
+    "assume an ideal inner loop (an acceleration flown at once, no drag); on a real PX4 / ArduPilot "
+    "vehicle they limit-cycle. Use PathFollower(path, speed) (the default) for a real one"
 )
+
+
+class ControllerConfig(Protocol):
+    """What :meth:`PathFollower.from_config` reads (``pf_offboard.config.Config`` has it)."""
+
+    path: Any  # with .spline() -> Path
+    speed_m_s: float
+    gains: Gains
+    yaw: YawSpec
+    limits: Limits
+    vehicle: VehicleModel
+    compensation: Compensation
+    speed_profile: SpeedProfileSpec | None
+    feedforward: str
 
 
 class _Evaluation(NamedTuple):
@@ -138,6 +163,56 @@ def _finite(*groups: tuple[float, ...]) -> bool:
     return True
 
 
+class _StartRamp:
+    """Start gently, then never again: the reference speed's magnitude rises from the speed along
+    the path at activation as ``sqrt(v0^2 + 2 a s)`` over the distance ``s`` travelled along the
+    path since then (``a`` = ``limits.max_tangential_accel_m_s2``), with its feed-forward ``a``,
+    and the speed loop's correction is bounded by ``a`` meanwhile. Once the ramp reaches the
+    reference it is done until :meth:`reset` (activation): in steady state the speed loop is never
+    bounded, whatever drag or estimator noise it has to hold against. A function of the distance
+    travelled, not of time: like the projector's warm start, the only memory is where it began."""
+
+    def __init__(self, accel_m_s2: float | None, lap_m: float | None, speed: float) -> None:
+        self.accel = accel_m_s2
+        self.lap = lap_m
+        self.sign = 1.0 if speed > 0.0 else -1.0
+        self.reset()
+
+    def reset(self) -> None:
+        self.done = self.accel is None
+        self._eta1: float | None = None
+        self._s = 0.0
+        self._v0 = 0.0
+
+    def _travelled(self, eta1: float) -> float:
+        assert self._eta1 is not None
+        d = eta1 - self._eta1
+        if self.lap is not None:
+            half = 0.5 * self.lap
+            d = (d + half) % self.lap - half
+        s = self._s + self.sign * d
+        return s if s > 0.0 else 0.0
+
+    def advance(self, eta1: float, speed_along_m_s: float) -> None:
+        """Record the state of one control step (arclength m, speed along the tangent m/s)."""
+        if self.done:
+            return
+        if self._eta1 is None:
+            v0 = self.sign * speed_along_m_s
+            self._v0 = v0 if v0 > 0.0 and math.isfinite(v0) else 0.0
+            self._s = 0.0
+        else:
+            self._s = self._travelled(eta1)
+        self._eta1 = eta1
+
+    def speed(self, eta1: float) -> float | None:
+        """|eta2_ref| the ramp allows at arclength ``eta1`` (m/s); None once done (or not started)."""
+        if self.done or self._eta1 is None:
+            return None
+        assert self.accel is not None
+        return math.sqrt(self._v0 * self._v0 + 2.0 * self.accel * self._travelled(eta1))
+
+
 class PathFollower:
     """Time-invariant path-following controller of Kumar & Gill for one path.
 
@@ -149,16 +224,25 @@ class PathFollower:
     def __init__(
         self,
         path: Path,
-        speed: float = 1.5,
+        speed: float = DEFAULT_SPEED_M_S,
         *,
         gains: Gains | None = None,
         yaw: YawSpec | None = None,
         limits: Limits | None = None,
         projector: Any = None,
+        vehicle: VehicleModel | None = None,
+        compensation: Compensation | None = None,
         compensator: InnerLoopCompensator | None = None,
         speed_profile: SpeedProfileSpec | None = None,
         feedforward: str = "on_path",
     ) -> None:
+        """The defaults are the shipped controller (the same a config with only ``path`` and
+        ``speed_m_s`` builds): ``vehicle`` :meth:`VehicleModel.typical`, ``compensation``
+        :class:`Compensation` () (observer + predictor + inversion + integral action; it acts when
+        :meth:`update` gets ``time_s``), ``gains`` derived from the vehicle with the compensation's
+        phase margins (``Gains()`` for the typical vehicle), ``limits`` :class:`Limits` ().
+        ``compensator``: a ready :class:`InnerLoopCompensator` instead of the one ``vehicle`` and
+        ``compensation`` describe. :meth:`paper` builds the paper's law as published."""
         try:
             speed = float(speed)
         except (TypeError, ValueError):
@@ -167,7 +251,12 @@ class PathFollower:
             raise InputError("speed_m_s", f"must be non-zero with |speed| <= {MAX_SPEED_M_S} m/s, got {speed}")
         self.path = path
         self.speed = speed
-        self.gains = gains if gains is not None else Gains()
+        self.vehicle = vehicle if vehicle is not None else VehicleModel.typical()
+        self.compensation = compensation if compensation is not None else Compensation()
+        if gains is None:
+            c = self.compensation
+            gains = gains_for_vehicle(self.vehicle, c.phase_margin_deg, c.tangential_phase_margin_deg)
+        self.gains = gains
         self.yaw = yaw if yaw is not None else YawSpec()
         self.limits = limits if limits is not None else Limits()
         if projector is None:
@@ -177,6 +266,12 @@ class PathFollower:
         self.projector = projector
         # Inner-loop compensation (observer + predictor + inversion); None: the paper's ideal
         # inner loop. The measured state then gets its own projector for honest reporting.
+        if compensator is None and self.compensation.enabled:
+            c = self.compensation
+            compensator = InnerLoopCompensator(
+                self.vehicle, observer_rad_s=c.observer_rad_s,
+                speed_integral_rad_s=c.integral_rad_s, offset_integral_rad_s=c.integral_rad_s,
+            )  # fmt: skip
         self.compensator = compensator
         self._measured_projector: Any = None
         if compensator is not None:
@@ -190,7 +285,11 @@ class PathFollower:
             raise InputError("feedforward", ANY_STATE_NEEDS_NO_COMPENSATION)
         self.feedforward = feedforward
         # eta2_ref(eta1) from a speed profile (None: the constant ``speed``, as in the paper)
-        self.profile = SpeedProfile(path, speed_profile, self.limits, speed) if speed_profile is not None else None
+        # planned for the inner loop's response (lag + delay of the vehicle model; the paper's ideal
+        # loop: 0): a slower loop plans lower accelerations
+        response_s = max(self.vehicle.accel_lag_xy_s, self.vehicle.accel_lag_z_s) + self.vehicle.accel_delay_s
+        self.profile = (SpeedProfile(path, speed_profile, self.limits, speed, response_s)
+                        if speed_profile is not None else None)  # fmt: skip
         self._yaw = YawProfile(self.yaw, path.length_m, path.closed, speed)
         self._closed = bool(path.closed)
         self._lam_max = float(path.lam_max)
@@ -198,32 +297,44 @@ class PathFollower:
         self._eval = path.eval_floats
         self._jets = path.frame_jets
         self._arclength = path.arclength
+        self._ramp = _StartRamp(self.limits.max_tangential_accel_m_s2, self._length if self._closed else None, speed)
 
     @classmethod
-    def from_config(cls, config: Config | str | os.PathLike[str]) -> PathFollower:
-        """Build the path and follower from a YAML file (or a loaded :class:`~pf_offboard.config.Config`)."""
-        from pf_offboard.config import Config, load_config
-
-        cfg = config if isinstance(config, Config) else load_config(config)
-        path = cfg.path.spline()
-        comp = None
-        if cfg.compensation.enabled:
-            c = cfg.compensation
-            comp = InnerLoopCompensator(
-                cfg.vehicle,
-                observer_rad_s=c.observer_rad_s,
-                speed_integral_rad_s=c.integral_rad_s,
-                offset_integral_rad_s=c.integral_rad_s,
-            )
+    def paper(
+        cls, path: Path, speed: float = DEFAULT_SPEED_M_S, *, yaw: YawSpec | None = None, limits: Limits | None = None,
+        projector: Any = None, speed_profile: SpeedProfileSpec | None = None, feedforward: str = "on_path",
+    ) -> PathFollower:  # fmt: skip
+        """The paper's law as published: :meth:`Gains.paper` (6 Hz / 0.7, 4 Hz / 0.8), no inner-loop
+        compensation, no start ramp (``limits.max_tangential_accel_m_s2`` None unless ``limits``
+        says otherwise). It needs the paper's ideal inner loop — an acceleration flown at once, no
+        drag, no delay — and warns (:class:`UserWarning`) that a real vehicle is not one."""
+        warnings.warn(PAPER_WARNING, UserWarning, stacklevel=2)
+        if limits is None:
+            limits = Limits(max_tangential_accel_m_s2=None)
         return cls(
-            path, cfg.speed_m_s, gains=cfg.gains, yaw=cfg.yaw, limits=cfg.limits, compensator=comp,
-            speed_profile=cfg.speed_profile, feedforward=cfg.feedforward,
+            path, speed, gains=Gains.paper(), yaw=yaw, limits=limits, projector=projector, vehicle=VehicleModel(),
+            compensation=Compensation.off(), speed_profile=speed_profile, feedforward=feedforward,
+        )  # fmt: skip
+
+    @classmethod
+    def from_config(cls, config: ControllerConfig) -> PathFollower:
+        """Build the path and follower from a loaded config (``pf_offboard.config.load_config``;
+        the core never reads files)."""
+        if isinstance(config, (str, os.PathLike)):
+            raise InputError("config", "PathFollower.from_config takes a loaded config: "
+                             "PathFollower.from_config(pf_offboard.config.load_config(path))")  # fmt: skip
+        path = config.path.spline()
+        return cls(
+            path, config.speed_m_s, gains=config.gains, yaw=config.yaw, limits=config.limits,
+            vehicle=config.vehicle, compensation=config.compensation,
+            speed_profile=config.speed_profile, feedforward=config.feedforward,
         )  # fmt: skip
 
     def reset(self) -> None:
         """Forget the projection warm start and the compensator's state (activation, estimator
         reset, position jump)."""
         self.projector.reset()
+        self._ramp.reset()
         if self.compensator is not None:
             self.compensator.reset()
             self._measured_projector.reset()
@@ -292,6 +403,17 @@ class PathFollower:
         map a_des(x) whose derivative along the closed-loop flow is the any-state feed-forward."""
         st = terms.state
         eta2_ref, deta2, ddeta2 = self.reference(st.eta1)
+        # speed profile: the tangential feed-forward d(eta2_ref)/dt = eta2_ref'(eta1) eta2
+        ff = deta2 * st.eta2
+        cap = math.inf
+        ramp = self._ramp.speed(st.eta1)
+        if ramp is not None and ramp < abs(eta2_ref):
+            # the start ramp: its speed, its feed-forward (a constant acceleration, faded out over
+            # the ramp's last RAMP_END_S: no acceleration step where it ends), a bounded correction
+            assert self._ramp.accel is not None
+            cap = self._ramp.accel
+            ff = self._ramp.sign * cap * min(1.0, (abs(eta2_ref) - ramp) / (cap * RAMP_END_S))
+            eta2_ref, deta2, ddeta2 = math.copysign(ramp, eta2_ref), 0.0, 0.0
         # blend weight of the approach fallback
         r = (y[0] - s[0], y[1] - s[1], y[2] - s[2])
         dist = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
@@ -314,14 +436,13 @@ class PathFollower:
             terms = terms._replace(state=st._replace(xi1=st.xi1 + b_xi1, phi1=st.phi1 + b_phi1))
         tube: LawOutput | None = None
         if w < 1.0:
-            # speed profile: the tangential feed-forward d(eta2_ref)/dt = eta2_ref'(eta1) eta2
-            tube = law.tube(terms, eta2_ref_law, deta2 * st.eta2, bisection_steps or BISECTION_STEPS)
+            tube = law.tube(terms, eta2_ref_law, ff, bisection_steps or BISECTION_STEPS, cap)
         if tube is None:
             w = 1.0
         # unit tangent and arclength derivatives at lam* (approach law, yaw, jerk feed-forward)
         tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
         if w > 0.0:
-            app = law.approach(r, v, tan, 0.0 if past_end else eta2_ref)
+            app = law.approach(r, v, tan, 0.0 if past_end else eta2_ref, cap)
             if tube is None:
                 res = app
             else:
@@ -430,6 +551,15 @@ class PathFollower:
                 comp.reset()
                 y, v = y_meas, v_meas
         lam, s, terms = self._terms(y, v)
+        ramp = self._ramp
+        if not ramp.done:
+            d1 = s[3:6]
+            n1 = math.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+            eta1 = terms.state.eta1
+            ramp.advance(eta1, (v[0] * d1[0] + v[1] * d1[1] + v[2] * d1[2]) / n1)
+            allowed = ramp.speed(eta1)
+            if allowed is not None and allowed >= abs(self.reference(eta1)[0]) - RAMP_DONE_M_S:
+                ramp.done = True
         offsets = comp.integral_offsets() if comp is not None else None
         ev = self._evaluate(y, v, lam, s, terms, offsets)
         st, eta2_ref, w, res, tan, s_ss = ev.state, ev.eta2_ref, ev.w, ev.res, ev.tan, ev.s_ss

@@ -5,7 +5,8 @@ Near the path the transversal law is the paper's linear PD ``u = -kp e - kd e_do
 ``v_d = -(kp/kd) e``; far from the path the desired approach speed ``|v_d|`` is limited by
 ``max_approach_speed`` and by ``sqrt(2 a_dec |e|)`` (arrive without overshoot), and ``|u|`` by the
 acceleration every direction can deliver. The tangential law is the velocity loop
-``u_eta = kd_t (eta2_ref - eta2)``, its magnitude bounded by ``limits.max_tangential_accel_m_s2``.
+``u_eta = kd_t (eta2_ref - eta2)``; its magnitude is bounded only when the caller passes a cap
+(the follower does during its start ramp, ``limits.max_tangential_accel_m_s2``).
 
 Slew limit (``limits.max_tilt_rate_rad_s``, jerk ``J = g * rate``): both velocity loops become
 square-root controllers beyond ``|dv| = J/k^2`` and the approach-speed profile is bounded by
@@ -65,8 +66,6 @@ class ControlLaw:
         self.jerk = G * rate if rate is not None else math.inf
         self.dv_lin = self.jerk / (self.kd * self.kd)
         self.dv_lin_t = self.jerk / (self.kd_t * self.kd_t)
-        bound = limits.max_tangential_accel_m_s2
-        self.u_t_max = bound if bound is not None else math.inf
         # Position level: the approach speed may not change faster than the (scheduled) velocity
         # loop can follow: time scale e/v_d >= kappa * sqrt(v_d / 2J) with kappa = kd^2/kp (the
         # paper's ratio of the two loops' time scales in the linear region) gives
@@ -132,25 +131,26 @@ class ControlLaw:
             return ux * k, uy * k, True, limited
         return ux, uy, False, limited
 
-    def tangential(self, eta2_ref: float, eta2: float) -> float:
+    def tangential(self, eta2_ref: float, eta2: float, cap: float = math.inf) -> float:
         """u_eta of the tangential velocity loop (linear near eta2_ref, square-root beyond), at
-        most ``limits.max_tangential_accel_m_s2`` in magnitude."""
+        most ``cap`` in magnitude."""
         dv = eta2_ref - eta2
         if abs(dv) <= self.dv_lin_t:
             u = self.kd_t * dv
         else:
             u = math.copysign(self.shape(self.kd_t, self.dv_lin_t, abs(dv)), dv)
-        cap = self.u_t_max
         return cap if u > cap else (-cap if u < -cap else u)
 
     # ------------------------------------------------------------------ the two laws
     def tube(
-        self, terms: ExactTerms, eta2_ref: float, feedforward_m_s2: float = 0.0, bisection_steps: int = BISECTION_STEPS
+        self, terms: ExactTerms, eta2_ref: float, feedforward_m_s2: float = 0.0, bisection_steps: int = BISECTION_STEPS,
+        tangential_cap: float = math.inf,
     ) -> LawOutput | None:
         """Exact TFL with limits inside the tube; None if beta is singular.
 
-        ``feedforward_m_s2``: added to the tangential law's u_eta (a speed profile's
-        d(eta2_ref)/dt); ``bisection_steps``: of the allocation's scalings (the any-state
+        ``feedforward_m_s2``: added to the tangential law's u_eta (a speed profile's or the start
+        ramp's d(eta2_ref)/dt); ``tangential_cap``: bound on the speed loop's correction |u_eta|
+        before that feed-forward (a saturation where it binds); ``bisection_steps``: of the allocation's scalings (the any-state
         feed-forward differentiates the law with more, so that it is smooth)."""
         cols = inverse_columns(terms.beta1, terms.beta2, terms.beta3)
         if cols is None:
@@ -159,8 +159,8 @@ class ControlLaw:
         st = terms.state
         al1, al2, al3 = terms.alpha
         u_xi, u_phi, reduced, limited = self.transversal(st.xi1, st.xi2, st.phi1, st.phi2)
-        u_eta = self.tangential(eta2_ref, st.eta2)
-        bounded = abs(u_eta) >= self.u_t_max  # limits.max_tangential_accel_m_s2 binds: a saturation too
+        u_eta = self.tangential(eta2_ref, st.eta2, tangential_cap)
+        bounded = abs(u_eta) >= tangential_cap  # the start ramp's bound binds: a saturation too
         if feedforward_m_s2:
             u_eta += feedforward_m_s2
         # a_b: keeps (eta2, xi2, phi2) constant; a_t: transversal correction
@@ -215,7 +215,7 @@ class ControlLaw:
         )
         return LawOutput(a, clipped or bounded, reduced, limited)
 
-    def approach(self, r: Vec, v: Vec, t: Vec, eta2_ref: float) -> LawOutput:
+    def approach(self, r: Vec, v: Vec, t: Vec, eta2_ref: float, tangential_cap: float = math.inf) -> LawOutput:
         """Cartesian law far from the path / outside the tube / past an open path's end.
 
         ``r = y - target`` (target: the closest point, or the end point), ``t`` the unit tangent
@@ -247,9 +247,9 @@ class ControlLaw:
             n = self.u_max
             reduced = True
         # along t
-        at = self.tangential(eta2_ref, -et)
+        at = self.tangential(eta2_ref, -et, tangential_cap)
         room = math.sqrt(max(self.u_max * self.u_max - n * n, 0.0))
-        clipped = abs(at) >= self.u_t_max
+        clipped = abs(at) >= tangential_cap
         if at > room:
             at, clipped = room, True
         elif at < -room:

@@ -54,6 +54,18 @@ MIN_GRID_POINTS = 200
 MAX_GRID_POINTS = 20000
 _FEASIBLE_TOL = 1e-9
 JERK_FLOOR_SPEED_M_S = 0.25  # speed used in the jerk bound below it (m/s): see _jerk_smooth
+# The vehicle's inner loop (its identified lag + delay, s) scales the share of the limits the
+# reference may use: accel_share * RESPONSE_REFERENCE_S / (RESPONSE_REFERENCE_S + lag + delay), so
+# a slower inner loop plans lower accelerations and leaves the feedback more room. An ideal inner
+# loop keeps accel_share; the typical model (0.2 s) gets 5/7 of it (0.5 of the default 0.7): on
+# the px4-sih mock at max_speed 3 m/s the full 0.7 saturated the speed loop 45-81 % of the flight
+# (14-124 cm off the path), 0.5 flew 2.7-6.2 cm.
+RESPONSE_REFERENCE_S = 0.5
+
+
+def response_share(accel_share: float, response_s: float) -> float:
+    """The share of the limits a reference may use on an inner loop answering after ``response_s``."""
+    return accel_share * RESPONSE_REFERENCE_S / (RESPONSE_REFERENCE_S + max(response_s, 0.0))
 
 
 @dataclass(frozen=True)
@@ -175,9 +187,9 @@ def _table_speed(table: tuple[tuple[float, float], ...], eta1: NDArray[np.float6
 class _Feasible:
     """Tangential-acceleration interval at (grid point, b = V^2) under the scaled thrust set."""
 
-    def __init__(self, geo: _Geometry, limits: Limits, spec: SpeedProfileSpec) -> None:
+    def __init__(self, geo: _Geometry, limits: Limits, spec: SpeedProfileSpec, response_s: float = 0.0) -> None:
         self.set = ThrustSet(limits.min_thrust_m_s2, limits.max_thrust_m_s2, limits.tan_tilt)
-        self.inv_share = 1.0 / spec.accel_share
+        self.inv_share = 1.0 / response_share(spec.accel_share, response_s)
         self.a_max = spec.max_tangential_accel_m_s2
         self.t = [tuple(r) for r in geo.t_dir.tolist()]
         self.k = [tuple(r) for r in geo.s_ss.tolist()]
@@ -365,13 +377,16 @@ class SpeedProfile:
     to [0, L] (0 at the end travelled towards).
     """
 
-    def __init__(self, path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float) -> None:
+    def __init__(self, path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float, response_s: float = 0.0) -> None:
+        """``response_s``: the inner loop's lag + delay (s; 0: the paper's ideal one), which lowers
+        the share of the limits the reference uses (:func:`response_share`)."""
         self.spec = spec
+        self.response_s = float(response_s)
         self.direction = 1.0 if direction >= 0.0 else -1.0
         self.closed = bool(path.closed)
         self.length_m = float(path.length_m)
         geo = _geometry(path, spec, self.direction)
-        feas = _Feasible(geo, limits, spec)
+        feas = _Feasible(geo, limits, spec, self.response_s)
         closed = self.closed
         ub = _upper_bound(geo, feas, closed)
         self._pm_b = _passes(ub, feas, geo.ds, closed)  # the lower bound: acceleration limits only
@@ -471,11 +486,11 @@ def _within(iv: tuple[float, float] | None, a: float, tol: float = 1e-6) -> bool
     return iv is not None and iv[0] - tol <= a <= iv[1] + tol
 
 
-def point_mass_lap_time(path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float = 1.0) -> float:
+def point_mass_lap_time(path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float = 1.0, response_s: float = 0.0) -> float:
     """Travel time (s) of a point mass along the path under the profile's acceleration limits
     (thrust set scaled by ``accel_share``, ``max_tangential_accel``, speed caps) and no jerk bound:
     the lower bound for any profile with those limits (one lap on a closed path)."""
     geo = _geometry(path, spec, direction)
-    feas = _Feasible(geo, limits, spec)
+    feas = _Feasible(geo, limits, spec, response_s)
     closed = bool(path.closed)
     return _travel_time(_passes(_upper_bound(geo, feas, closed), feas, geo.ds, closed), geo.ds, closed)

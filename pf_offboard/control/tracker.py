@@ -29,7 +29,6 @@ Pure and I/O-free; world ENU z up, body FLU; m, m/s, m/s^2, s.
 from __future__ import annotations
 
 import math
-import os
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
@@ -45,6 +44,7 @@ from pf_offboard.control.feedforward import (
 )
 from pf_offboard.control.follower import (
     MAX_POSITION_ABS_M,
+    ControllerConfig,
     MAX_VELOCITY_ABS_M_S,
     PathFollower,
     _finite,
@@ -52,12 +52,11 @@ from pf_offboard.control.follower import (
     evaluate_terms,
 )
 from pf_offboard.control.law import ControlLaw
-from pf_offboard.control.types import GRAVITY_M_S2, Command, Gains, Limits, Saturation, YawSpec
+from pf_offboard.control.types import GRAVITY_M_S2, Command, Compensation, Gains, Limits, Saturation, VehicleModel, YawSpec
 from pf_offboard.errors import InputError
 from pf_offboard.frames import wrap_pi
 
 if TYPE_CHECKING:
-    from pf_offboard.config import Config
     from pf_offboard.path import Path
 
 G = GRAVITY_M_S2
@@ -98,11 +97,14 @@ class TrajectoryTracker:
         yaw: YawSpec | None = None,
         limits: Limits | None = None,
         projector: Any = None,
+        vehicle: VehicleModel | None = None,
+        compensation: Compensation | None = None,
         compensator: InnerLoopCompensator | None = None,
     ) -> None:
         # the follower's validation and building blocks (control law with the limits, yaw profile,
-        # projector), so both controllers are built from the same arguments the same way
-        base = PathFollower(path, speed, gains=gains, yaw=yaw, limits=limits, projector=projector, compensator=compensator)
+        # projector), so both controllers are built from the same arguments (and defaults) the same way
+        base = PathFollower(path, speed, gains=gains, yaw=yaw, limits=limits, projector=projector, vehicle=vehicle,
+                            compensation=compensation, compensator=compensator)  # fmt: skip
         self.path, self.speed, self.gains, self.yaw, self.limits = base.path, base.speed, base.gains, base.yaw, base.limits
         self.projector, self.compensator = base.projector, base.compensator
         self.law: ControlLaw = base.law
@@ -113,8 +115,8 @@ class TrajectoryTracker:
         self._s0 = 0.0
 
     @classmethod
-    def from_config(cls, config: Config | str | os.PathLike[str]) -> TrajectoryTracker:
-        """Build the path and tracker from a YAML file (or a loaded :class:`~pf_offboard.config.Config`),
+    def from_config(cls, config: ControllerConfig) -> TrajectoryTracker:
+        """Build the path and tracker from a loaded config (``pf_offboard.config.load_config``),
         with the gains, limits, yaw and compensation the path follower gets from it (whatever
         its ``controller`` key says)."""
         return cls.like(PathFollower.from_config(config))
@@ -124,7 +126,8 @@ class TrajectoryTracker:
         """The tracker of ``follower``'s path, speed, gains, yaw, limits and compensator (shared)."""
         return cls(
             follower.path, follower.speed, gains=follower.gains, yaw=follower.yaw, limits=follower.limits,
-            compensator=follower.compensator,
+            vehicle=follower.vehicle, compensator=follower.compensator,
+            compensation=follower.compensation if follower.compensator is not None else Compensation.off(),
         )  # fmt: skip
 
     def reset(self) -> None:

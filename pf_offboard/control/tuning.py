@@ -18,7 +18,7 @@ from pf_offboard.control.types import Gains, VehicleModel
 from pf_offboard.errors import InputError
 
 UNMODELLED_DELAY_SHARE = 0.0
-PAPER = Gains()  # 6 Hz / 0.7 transversal, 4 Hz / 0.8 tangential
+PAPER = Gains.paper()  # 6 Hz / 0.7 transversal, 4 Hz / 0.8 tangential
 TRANSVERSAL_DAMPING = 1.0
 TANGENTIAL_DAMPING = 1.0
 

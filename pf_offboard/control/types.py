@@ -16,6 +16,13 @@ from pf_offboard.errors import InputError
 
 GRAVITY_M_S2 = 9.81  # the paper's g
 MIN_THRUST_FLOOR_M_S2 = 0.5  # lowest allowed min_thrust_m_s2 (attitude needs |f| > 0)
+DEFAULT_SPEED_M_S = 1.0  # eta2_ref when none is given (PathFollower and a config without speed_m_s)
+# body-rate feed-forward: on_path (the paper, eqs. 25-28) | any_state (docs/controller.md § 3b)
+FEEDFORWARD_MODES = ("on_path", "any_state")
+ANY_STATE_NEEDS_NO_COMPENSATION = (
+    "any_state needs compensation.enabled: false (with the inner-loop compensation the lag lead "
+    "replaces the roll/pitch body-rate feed-forward)"
+)
 
 
 def _finite(name: str, value: float) -> float:
@@ -27,17 +34,29 @@ def _finite(name: str, value: float) -> float:
 
 @dataclass(frozen=True)
 class Gains:
-    """Loop gains as bandwidth [Hz] and damping ratio (the paper: 6 Hz / 0.7 and 4 Hz / 0.8).
+    """Loop gains as bandwidth [Hz] and damping ratio.
+
+    The defaults are what ``gains: auto`` derives for :meth:`VehicleModel.typical` (a typical PX4 /
+    ArduPilot inner loop: lag 0.1 s, delay 0.1 s) with the default :class:`Compensation`'s phase
+    margins (``pf_offboard.control.tuning.gains_for_vehicle``; a test keeps them equal). The
+    paper's 6 Hz / 0.7 and 4 Hz / 0.8 are :meth:`paper`: they need an ideal inner loop.
 
     Transversal (xi, phi): ``u = -kp e - kd e_dot`` with ``w = 2 pi f``, ``kp = w^2``,
     ``kd = 2 zeta w``. Tangential: velocity loop ``u_eta = kd_t (eta2_ref - eta2)``,
     ``kd_t = 2 zeta_t w_t`` (see docs/controller.md).
     """
 
-    transversal_bandwidth_hz: float = 6.0
-    transversal_damping: float = 0.7
-    tangential_bandwidth_hz: float = 4.0
-    tangential_damping: float = 0.8
+    transversal_bandwidth_hz: float = 0.927
+    transversal_damping: float = 1.0
+    tangential_bandwidth_hz: float = 1.475
+    tangential_damping: float = 1.0
+
+    @classmethod
+    def paper(cls) -> Gains:
+        """The paper's gains (6 Hz / 0.7 transversal, 4 Hz / 0.8 tangential). They assume the
+        paper's ideal inner loop (an acceleration flown at once); on a real PX4 / ArduPilot inner
+        loop they leave a negative phase margin and limit-cycle."""
+        return cls(6.0, 0.7, 4.0, 0.8)
 
     def __post_init__(self) -> None:
         for name in ("transversal_bandwidth_hz", "transversal_damping", "tangential_bandwidth_hz", "tangential_damping"):
@@ -96,16 +115,16 @@ class Limits:
     near the path the paper's linear laws act unchanged. Choose about 1/3-1/2 of what the vehicle
     really slews. ``None``: no shaping (the paper's laws everywhere; ideal inner loop only).
 
-    ``max_tangential_accel_m_s2`` bounds the tangential (speed) loop's correction ``|u_eta|``
-    (m/s², a feed-forward such as a speed profile's comes on top): how hard the vehicle may speed
-    up or brake to reach eta2_ref. Without it a vehicle at rest on the path starts along it with
-    the whole tilt budget at once: a 46-50 deg tilt command at 1.5 m/s on the figure-eight, which
-    tripped the tilt watchdog on a real ArduCopter SITL (so did 3 m/s²; 1.5 flew it). Stateless,
-    so the law stays time-invariant and the path invariant. ``None``: no bound (the paper's ideal
-    inner loop).
+    ``max_tangential_accel_m_s2`` is the start ramp's acceleration: after activation (``reset()``)
+    the reference speed rises from the speed along the path at this rate over the distance
+    travelled, with its feed-forward, the speed loop's correction bounded by it meanwhile; once the
+    reference is reached the speed loop is never bounded (a static bound fought the steady state:
+    PX4 SIH's drag at 1.5 m/s equals 1.5 m/s^2). An unramped start from rest leans 38 deg at
+    1.5 m/s, which tripped the tilt watchdog on a real ArduCopter SITL. ``None``: no ramp (the
+    paper's ideal inner loop).
     """
 
-    max_tilt_deg: float = 35.0
+    max_tilt_deg: float = 45.0  # PX4 MPC_TILTMAX_AIR default; the shipped configs flew 45-50 on both real SITLs
     min_thrust_m_s2: float = 2.0
     max_thrust_m_s2: float = 20.0
     max_approach_speed_m_s: float = 2.0
@@ -177,8 +196,11 @@ class VehicleModel:
     @classmethod
     def typical(cls) -> VehicleModel:
         """What a config without a ``vehicle:`` section assumes: a typical PX4 / ArduPilot
-        multicopter (lag 0.1 s, delay 0.1 s, unit gain; drag is left to the observer)."""
-        return cls(accel_lag_xy_s=0.1, accel_lag_z_s=0.05, accel_delay_s=0.1, rate_time_constant_s=0.05)
+        multicopter (lag 0.1 s, delay 0.1 s, unit gain; drag is left to the observer). Its rate
+        loop's 0.0625 s gives ``rates`` output an attitude loop of 4 x that = 0.25 s: on the
+        px4-sih mock 0.2 s flew 5-6 cm and 18-34 cm/s (speed loop oscillating), 0.25 s 1.9-3.1 cm,
+        2.2-7.8 cm/s, 0.3 s worse again; the arducopter mock flies 0.25 s as well as before."""
+        return cls(accel_lag_xy_s=0.1, accel_lag_z_s=0.05, accel_delay_s=0.1, rate_time_constant_s=0.0625)
 
     def __post_init__(self) -> None:
         bounds = {
@@ -198,6 +220,35 @@ class VehicleModel:
             if not lo <= v <= hi:
                 raise InputError(f"vehicle.{name}", f"must be in [{lo:g}, {hi:g}], got {v:g}")
             object.__setattr__(self, name, v)
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """Inner-loop compensation settings (:class:`~pf_offboard.control.compensator.InnerLoopCompensator`:
+    disturbance observer + delay predictor + gain/drag inversion + integral action, from a
+    :class:`VehicleModel`), and the phase margins ``gains: auto`` keeps on that model.
+
+    The defaults are the shipped choice (the ``compensation:`` section's defaults too).
+    ``Compensation.off()``: the paper's law as published (no observer, predictor or integral).
+    """
+
+    enabled: bool = True
+    observer_rad_s: float = 8.0  # disturbance-observer poles (rad/s)
+    integral_rad_s: float = 1.0  # integral action on speed and transversal offsets (rad/s)
+    phase_margin_deg: float = 30.0  # transversal loops, for gains: auto
+    tangential_phase_margin_deg: float = 40.0  # the speed loop's, for gains: auto
+
+    def __post_init__(self) -> None:
+        for name, lo, hi in (("observer_rad_s", 0.0, 50.0), ("integral_rad_s", 0.0, 10.0),
+                             ("phase_margin_deg", 10.0, 80.0), ("tangential_phase_margin_deg", 10.0, 80.0)):  # fmt: skip
+            v = _finite(f"compensation.{name}", getattr(self, name))
+            if not lo <= v <= hi:
+                raise InputError(f"compensation.{name}", f"must be in [{lo:g}, {hi:g}], got {v:g}")
+
+    @classmethod
+    def off(cls) -> Compensation:
+        """No compensation: the paper's stateless law (for an ideal inner loop)."""
+        return cls(enabled=False)
 
 
 YAW_MODES = ("constant", "tangent", "table")

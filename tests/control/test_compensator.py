@@ -15,7 +15,7 @@ from collections import deque
 import numpy as np
 import pytest
 
-from pf_offboard.control import Gains, Limits, PathFollower, VehicleModel
+from pf_offboard.control import Compensation, Gains, Limits, PathFollower, VehicleModel
 from pf_offboard.control.compensator import InnerLoopCompensator
 from pf_offboard.control.tuning import gains_for_vehicle, phase_margin_deg
 from pf_offboard.errors import InputError
@@ -219,7 +219,8 @@ def _fly(model_true: VehicleModel, model_ctrl: VehicleModel | None, start_p, sta
     path = _paper_path()
     comp = InnerLoopCompensator(model_ctrl) if model_ctrl is not None else None
     gains = gains_for_vehicle(model_ctrl or model_true)
-    f = PathFollower(path, speed, gains=gains, limits=Limits(max_tilt_deg=45.0, max_thrust_m_s2=20.0), compensator=comp)
+    f = PathFollower(path, speed, gains=gains, limits=Limits(max_tilt_deg=45.0, max_thrust_m_s2=20.0), compensator=comp,
+                     compensation=None if comp is not None else Compensation.off())
     plant = ModelPlant(model_true, start_p, start_v, disturbance, gain_scale)
     log = []
     for _ in range(int(round(seconds / DT_CTRL_S))):
@@ -290,7 +291,7 @@ def test_lag_lead_replaces_the_roll_pitch_rate_feed_forward(yaw_mode: str) -> No
     yaw = YawSpec(mode=yaw_mode)
     speed = -1.5
     gains = gains_for_vehicle(MODEL)
-    paper_law = PathFollower(path, speed, gains=gains, yaw=yaw)  # the paper's law: no compensator state
+    paper_law = PathFollower(path, speed, gains=gains, yaw=yaw, compensation=Compensation.off())  # the paper's law: no compensator state
     worst_paper = 0.0
     for lam in np.linspace(0.0, path.lam_max, 13)[:-1]:
         q = path.eval_floats(float(lam))
@@ -316,15 +317,18 @@ def test_any_state_feed_forward_is_refused_with_the_compensator() -> None:
     with pytest.raises(InputError) as err:
         PathFollower(_paper_path(), -1.5, feedforward="any_state", compensator=InnerLoopCompensator(MODEL))
     assert err.value.field == "feedforward" and "compensation.enabled: false" in err.value.reason
-    PathFollower(_paper_path(), -1.5, feedforward="any_state")  # the paper's ideal inner loop: fine
+    with pytest.raises(InputError):
+        PathFollower(_paper_path(), -1.5, feedforward="any_state")  # the default compensates
+    PathFollower(_paper_path(), -1.5, feedforward="any_state", compensation=Compensation.off())  # the paper's ideal inner loop: fine
 
 
 def test_gains_from_model_keep_the_margin() -> None:
-    assert gains_for_vehicle(VehicleModel()) == Gains()  # ideal inner loop: the paper's gains
+    assert gains_for_vehicle(VehicleModel()) == Gains.paper()  # ideal inner loop: the paper's gains
+    assert gains_for_vehicle(VehicleModel.typical()) == Gains()  # the defaults: the typical vehicle's auto gains
     slow = VehicleModel(accel_lag_xy_s=0.2, accel_delay_s=0.1)
     fast = VehicleModel(accel_lag_xy_s=0.05, accel_delay_s=0.05)
     g_slow, g_fast = gains_for_vehicle(slow, 30.0), gains_for_vehicle(fast, 30.0)
-    assert g_slow.transversal_bandwidth_hz < g_fast.transversal_bandwidth_hz < Gains().transversal_bandwidth_hz
+    assert g_slow.transversal_bandwidth_hz < g_fast.transversal_bandwidth_hz < Gains.paper().transversal_bandwidth_hz
     w = 2 * math.pi * g_slow.transversal_bandwidth_hz
     z = g_slow.transversal_damping
 

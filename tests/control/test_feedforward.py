@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 from conftest import config_path
 
+from pf_offboard.control.types import Compensation, Gains
+from pf_offboard.config import load_config
 from pf_offboard import Path, PathFollower, YawSpec
 from pf_offboard.control.feedforward import YawProfile, attitude_from_thrust, onpath_derivatives, quaternion_from_axes
 from pf_offboard.control.types import GRAVITY_M_S2
@@ -47,9 +49,9 @@ CASES = [
 
 @pytest.mark.parametrize("name,yaw", CASES)
 def test_body_rates_match_attitude_finite_differences(name, yaw):
-    base = PathFollower.from_config(config_path(name))
+    base = PathFollower.from_config(load_config(config_path(name)))
     path, speed = base.path, base.speed
-    f = PathFollower(path, speed, gains=base.gains, yaw=yaw or base.yaw, limits=base.limits)
+    f = PathFollower(path, speed, gains=base.gains, yaw=yaw or base.yaw, limits=base.limits, compensation=Compensation.off())
     dt = 2e-3
     if path.closed:
         s0, n = 0.0, int(path.length_m / abs(speed) / dt)  # one full lap

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from conftest import PAPER_YAML
 
+from pf_offboard.control.types import Compensation, Gains
 from pf_offboard import PathFollower, YawSpec
 from pf_offboard.config import load_config
 from pf_offboard.control.profile import SpeedProfileSpec
@@ -102,9 +103,9 @@ def _follower(feedforward: str, yaw: YawSpec | None = None, profile: SpeedProfil
 )
 def test_any_state_rates_are_the_rate_of_the_commanded_attitude(yaw: YawSpec | None, profile: SpeedProfileSpec | None) -> None:
     ff = _follower("any_state", yaw, profile)
-    flow = PathFollower(ff.path, ff.speed, gains=ff.gains, yaw=ff.yaw, limits=ff.limits)  # a_des only
+    flow = PathFollower(ff.path, ff.speed, gains=ff.gains, yaw=ff.yaw, limits=ff.limits, compensation=Compensation.off())  # a_des only
     flow.profile = ff.profile  # the same eta2_ref(eta1) without recomputing it
-    onpath = PathFollower(ff.path, ff.speed, gains=ff.gains, yaw=ff.yaw, limits=ff.limits)
+    onpath = PathFollower(ff.path, ff.speed, gains=ff.gains, yaw=ff.yaw, limits=ff.limits, compensation=Compensation.off())
     onpath.profile = ff.profile
     rng = np.random.default_rng(20)
     errors, onpath_errors, kinks = [], [], 0

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from conftest import config_path, rk4_step
 
+from pf_offboard.control.types import Compensation, Gains
+from pf_offboard.config import load_config
 from pf_offboard import Gains, Limits, Path, PathFollower, YawSpec
 from pf_offboard.control.feasible import ThrustSet
 from pf_offboard.control.types import GRAVITY_M_S2
@@ -28,7 +30,7 @@ def feasible(limits: Limits, a: np.ndarray, tol: float = 1e-6) -> bool:
 def test_invariance_30_s_rk4(paper_path, speed):
     """Started on the path with velocity eta2_ref t, it stays on the path (<= 1e-5 m) for 30 s
     (about three laps)."""
-    f = PathFollower(paper_path, speed=speed)
+    f = PathFollower(paper_path, speed=speed, gains=Gains.paper(), compensation=Compensation.off())
     lam0 = 0.37 * paper_path.lam_max
     y = paper_path.eval(lam0).sigma.copy()
     v = speed * paper_path.frame(lam0).t
@@ -81,7 +83,7 @@ def test_attractive_from_200_random_starts_with_limits(paper_path, tilt_rate, ap
     times = []
     for i in range(200):
         speed = 1.5 if i % 2 else -1.5
-        f = PathFollower(paper_path, speed=speed, limits=limits)
+        f = PathFollower(paper_path, speed=speed, limits=limits, gains=Gains.paper(), compensation=Compensation.off())
         y, v = random_start(paper_path, rng)
         converged_at = None
         for k in range(int(20.0 / dt)):
@@ -113,8 +115,8 @@ def test_attractive_from_200_random_starts_with_limits(paper_path, tilt_rate, ap
 @pytest.mark.parametrize("name", ["paper.yaml", "figure8.yaml"])
 def test_self_intersection_eta1_monotonic(name, speed):
     """Two laps through the self-intersection: eta1 advances every step by eta2_ref dt (no branch jump)."""
-    path = PathFollower.from_config(config_path(name)).path
-    f = PathFollower(path, speed=speed)
+    path = PathFollower.from_config(load_config(config_path(name))).path
+    f = PathFollower(path, speed=speed, gains=Gains.paper(), compensation=Compensation.off())
     y = path.eval(0.0).sigma.copy()
     v = speed * path.frame(0.0).t
     dt = 0.005
@@ -154,7 +156,7 @@ def _fly(f: PathFollower, y, v, seconds: float, dt: float = 0.005):
 
 @pytest.mark.parametrize("name", ["straight.yaml", "racetrack.yaml"])
 def test_straight_segments_rmf_no_nans_or_spikes(name):
-    f = PathFollower.from_config(config_path(name))
+    f = PathFollower.from_config(load_config(config_path(name)))
     assert f.path.frame_kind == "rmf"
     lam = 0.3 * f.path.lam_max
     pt = f.path.eval(lam)
@@ -175,7 +177,7 @@ def test_straight_segments_rmf_no_nans_or_spikes(name):
 def test_open_path_stops_at_its_end(helix_frenet):
     """An open path: the follower brakes and holds at the end point (no NaN past the end)."""
     for speed in (1.5, -1.5):
-        f = PathFollower(helix_frenet, speed=speed)
+        f = PathFollower(helix_frenet, speed=speed, gains=Gains.paper(), compensation=Compensation.off())
         lam0 = 0.8 * helix_frenet.lam_max if speed > 0 else 0.2 * helix_frenet.lam_max
         y = helix_frenet.eval(lam0).sigma.copy()
         v = speed * helix_frenet.frame(lam0).t
@@ -190,7 +192,7 @@ def test_open_path_joined_before_its_start(helix_frenet):
     """Starting beyond the start of an open path: join at the start and travel on."""
     path = helix_frenet
     for speed, lam in ((1.0, 0.0), (-1.0, path.lam_max)):
-        f = PathFollower(path, speed=speed)
+        f = PathFollower(path, speed=speed, gains=Gains.paper(), compensation=Compensation.off())
         t = path.frame(lam).t
         y = path.eval(lam).sigma - np.sign(speed) * 0.8 * t
         cmds, y, v = _fly(f, y, np.zeros(3), 6.0)
@@ -202,7 +204,7 @@ def test_open_path_joined_before_its_start(helix_frenet):
 
 def test_far_start_bounded_and_limits_respected(paper_path):
     """100 m away at 10 m/s: commands stay within the limits, no NaN, heading back."""
-    f = PathFollower(paper_path, speed=1.5)
+    f = PathFollower(paper_path, speed=1.5, gains=Gains.paper(), compensation=Compensation.off())
     y = np.array([100.0, -40.0, 30.0])
     v = np.array([0.0, 10.0, -3.0])
     cmds, y2, _ = _fly(f, y, v, 10.0)
@@ -213,7 +215,7 @@ def test_far_start_bounded_and_limits_respected(paper_path):
 def test_one_metre_offset_respects_limits_and_priority(paper_path):
     """With the paper gains, 1 m off asks kp * 1 m > 1000 m/s^2 unlimited; the command is feasible,
     points toward the path and the tangential part is the one cut back."""
-    f = PathFollower(paper_path, speed=1.5)
+    f = PathFollower(paper_path, speed=1.5, gains=Gains.paper(), compensation=Compensation.off())
     assert f.gains.transversal_kp > 1000.0
     lam = 0.5 * paper_path.lam_max
     fr = paper_path.frame(lam)
@@ -226,7 +228,7 @@ def test_one_metre_offset_respects_limits_and_priority(paper_path):
 
 def test_bad_input_raises_and_never_commands():
     path = Path.from_waypoints([[0, 0, 1], [1, 0, 1], [1, 1, 1.5]], closed=True)
-    f = PathFollower(path, speed=1.0)
+    f = PathFollower(path, speed=1.0, gains=Gains.paper(), compensation=Compensation.off())
     with pytest.raises(InputError):
         f.update([math.nan, 0.0, 1.0], [0.0, 0.0, 0.0])
     with pytest.raises(InputError):
@@ -248,7 +250,7 @@ def test_bad_input_raises_and_never_commands():
 @pytest.mark.parametrize("name", ["paper.yaml", "straight.yaml", "helix.yaml"])
 def test_extreme_finite_states_give_finite_commands(name):
     """Up to the input bounds (1e6 m, 1e3 m/s per component) every command is finite."""
-    f = PathFollower.from_config(config_path(name))
+    f = PathFollower.from_config(load_config(config_path(name)))
     rng = np.random.default_rng(8)
     for pos_m in (0.0, 1e3, 1e5, 0.999e6):
         for vel_m_s in (0.0, 30.0, 0.999e3):
@@ -262,7 +264,7 @@ def test_extreme_finite_states_give_finite_commands(name):
 
 
 def test_value_objects_and_reset(paper_path):
-    f = PathFollower(paper_path, speed=-1.5, gains=Gains(), yaw=YawSpec.constant(0.3), limits=Limits())
+    f = PathFollower(paper_path, speed=-1.5, gains=Gains(), yaw=YawSpec.constant(0.3), limits=Limits(), compensation=Compensation.off())
     y = paper_path.eval(1.0).sigma + 0.1
     c = f.update(y, np.zeros(3))
     assert c.attitude.shape == (4,) and abs(np.linalg.norm(c.attitude) - 1.0) < 1e-12
@@ -281,13 +283,13 @@ def test_value_objects_and_reset(paper_path):
 @pytest.mark.parametrize("name", ["figure8.yaml", "racetrack.yaml", "helix.yaml", "straight.yaml"])
 def test_attractive_on_the_other_shipped_paths(name):
     """20 random starts (<= 5 m, <= 4 m/s) per shipped path, both directions, rmf and open paths."""
-    base = PathFollower.from_config(config_path(name))
+    base = PathFollower.from_config(load_config(config_path(name)))
     path = base.path
     rng = np.random.default_rng(sum(map(ord, name)))
     dt = 0.005
     for i in range(20):
         speed = base.speed if i % 2 else -base.speed
-        f = PathFollower(path, speed=speed, limits=base.limits)
+        f = PathFollower(path, speed=speed, limits=base.limits, gains=Gains.paper(), compensation=Compensation.off())
         lam = rng.uniform(0.2, 0.6) * path.lam_max  # open paths: leave room before the end
         d = rng.normal(size=3)
         y = path.eval(lam).sigma + d / np.linalg.norm(d) * rng.uniform(0.0, 5.0)
@@ -329,8 +331,7 @@ def test_transversal_correction_is_delivered_in_full_while_tangential_gives_way(
             max_thrust_m_s2=20.0 if tilt_rate is None else 12.0,
             max_tilt_rate_rad_s=tilt_rate,
             max_tangential_accel_m_s2=None,
-        ),
-    )
+        ), gains=Gains.paper(), compensation=Compensation.off())
     lam = 0.25 * paper_path.lam_max
     fr = paper_path.frame(lam)
     y = paper_path.eval(lam).sigma + offset_m * fr.e2
@@ -361,7 +362,7 @@ def test_transversal_correction_is_delivered_in_full_while_tangential_gives_way(
 def test_any_state_gives_a_feasible_finite_command(name):
     """500 random states (up to 20 m away, 15 m/s), each after a reset and then warm-started:
     the command is finite, within the limits, with a unit quaternion and thrust in range."""
-    f = PathFollower.from_config(config_path(name))
+    f = PathFollower.from_config(load_config(config_path(name)))
     rng = np.random.default_rng(5)
     lim = f.limits
     for i in range(500):

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from conftest import PAPER_YAML
 
+from pf_offboard.control.types import Compensation, Gains
 from pf_offboard import PathFollower, frames
 from pf_offboard.config import load_config
 
@@ -34,8 +35,7 @@ def follower(speed: float | None = None, gains: dict | None = None, limits: dict
         cfg.speed_m_s if speed is None else speed,
         gains=dataclasses.replace(cfg.gains, **(gains or {})),
         yaw=cfg.yaw,
-        limits=dataclasses.replace(cfg.limits, **(limits or {})),
-    )
+        limits=dataclasses.replace(cfg.limits, **(limits or {})), compensation=Compensation.off())
 
 
 def rates_command(q_des: np.ndarray, q_meas: np.ndarray, ff: np.ndarray, tau_s: float) -> np.ndarray:

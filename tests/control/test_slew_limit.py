@@ -10,6 +10,7 @@ import pytest
 import yaml
 from conftest import PAPER_YAML
 
+from pf_offboard.control.types import Compensation, Gains
 from pf_offboard import Gains, Limits, PathFollower
 from pf_offboard.config import ConfigError, load_config, parse_config
 from pf_offboard.control.law import ControlLaw
@@ -92,7 +93,7 @@ def test_command_rate_of_change_bounded_near_the_path(paper_path):
     """The failure mode on a real vehicle: 0.2 m/s transversal velocity error near the path. Paper
     law: ~10 m/s^2 demand; shaped: a few m/s^2 and it changes along the ideal closed-loop motion
     at no more than a few J (checked on the double integrator at 1 ms)."""
-    f = PathFollower(paper_path, speed=-1.5)
+    f = PathFollower(paper_path, speed=-1.5, gains=Gains.paper(), compensation=Compensation.off())
     lam = 0.3 * paper_path.lam_max
     fr = paper_path.frame(lam)
     y = paper_path.eval(lam).sigma + 0.002 * fr.e2

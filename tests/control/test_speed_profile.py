@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from conftest import PAPER_YAML, ROOT
 
+from pf_offboard.control.types import Compensation, Gains
 from pf_offboard import PathFollower
 from pf_offboard.config import load_config, parse_config
 from pf_offboard.control.feasible import ThrustSet
@@ -107,7 +108,7 @@ def test_open_path_stops_at_its_end(direction: float) -> None:
 def test_command_is_time_invariant(paper: PathFollower) -> None:
     """The command depends on the state only: the same state after different histories."""
     y, v = np.array([0.2, -1.4, 2.1]), np.array([-1.0, 2.0, 0.3])
-    other = PathFollower(paper.path, paper.speed, gains=paper.gains, yaw=paper.yaw, limits=paper.limits)
+    other = PathFollower(paper.path, paper.speed, gains=paper.gains, yaw=paper.yaw, limits=paper.limits, compensation=Compensation.off())
     other.profile = paper.profile
     paper.reset()
     a = paper.update(y, v)

@@ -10,10 +10,11 @@ from pathlib import Path as FsPath
 import numpy as np
 import pytest
 
+from pf_offboard.config import load_config
 from pf_offboard import Gains, Limits, Path
 from pf_offboard.control import Command, TrajectoryTracker
 from pf_offboard.control.feasible import ThrustSet
-from pf_offboard.control.types import GRAVITY_M_S2
+from pf_offboard.control.types import GRAVITY_M_S2, Compensation
 from pf_offboard.errors import InputError
 
 G = GRAVITY_M_S2
@@ -41,7 +42,7 @@ def fly(tracker: TrajectoryTracker, y, v, seconds: float, t0: float = 100.0, dt:
 @pytest.mark.parametrize("speed", [1.5, -1.5])
 def test_converges_to_the_timed_reference_within_the_limits(paper_path, speed):
     limits = Limits()
-    tracker = TrajectoryTracker(paper_path, speed, gains=Gains.from_bandwidth(2.0, damping=0.8), limits=limits)
+    tracker = TrajectoryTracker(paper_path, speed, gains=Gains.from_bandwidth(2.0, damping=0.8), limits=limits, compensation=Compensation.off())
     lam0 = 0.3 * paper_path.lam_max
     y0 = paper_path.eval(lam0).sigma + np.array([0.8, -0.5, 0.4])
     cmds, y, v, t_end = fly(tracker, y0, [1.0, 0.5, -0.5], 8.0)
@@ -65,7 +66,7 @@ def test_converges_to_the_timed_reference_within_the_limits(paper_path, speed):
 
 def test_on_the_reference_it_stays_on_it(paper_path):
     """Started exactly on the reference with its velocity: the feed-forward alone keeps it there."""
-    tracker = TrajectoryTracker(paper_path, 1.5)
+    tracker = TrajectoryTracker(paper_path, 1.5, gains=Gains.paper(), compensation=Compensation.off())
     lam0 = 0.6 * paper_path.lam_max
     y0 = paper_path.eval(lam0).sigma
     v0 = 1.5 * paper_path.frame(lam0).t
@@ -77,7 +78,7 @@ def test_on_the_reference_it_stays_on_it(paper_path):
 def test_behind_schedule_it_cuts_across(paper_path):
     """What the baseline is for: held back for 1.5 s, it leaves the path to catch the reference
     (a path follower would not)."""
-    tracker = TrajectoryTracker(paper_path, 1.5)
+    tracker = TrajectoryTracker(paper_path, 1.5, gains=Gains.paper(), compensation=Compensation.off())
     lam0 = 0.1 * paper_path.lam_max
     y0 = paper_path.eval(lam0).sigma
     tracker.update(y0, np.zeros(3), 0.0)  # activation; then the vehicle is stuck for 1.5 s
@@ -87,7 +88,7 @@ def test_behind_schedule_it_cuts_across(paper_path):
 
 def test_open_path_reference_brakes_and_holds_at_the_end(helix_frenet):
     for speed in (1.5, -1.5):
-        tracker = TrajectoryTracker(helix_frenet, speed)
+        tracker = TrajectoryTracker(helix_frenet, speed, gains=Gains.paper(), compensation=Compensation.off())
         lam0 = 0.8 * helix_frenet.lam_max if speed > 0 else 0.2 * helix_frenet.lam_max
         y0 = helix_frenet.eval(lam0).sigma
         v0 = speed * helix_frenet.frame(lam0).t
@@ -104,7 +105,7 @@ def test_open_path_reference_brakes_and_holds_at_the_end(helix_frenet):
 
 
 def test_reset_restarts_the_schedule_at_the_closest_point(paper_path):
-    tracker = TrajectoryTracker(paper_path, 1.5)
+    tracker = TrajectoryTracker(paper_path, 1.5, gains=Gains.paper(), compensation=Compensation.off())
     y1 = paper_path.eval(0.2 * paper_path.lam_max).sigma
     tracker.update(y1, np.zeros(3), 5.0)
     assert tracker.start == (5.0, pytest.approx(paper_path.arclength(0.2 * paper_path.lam_max), abs=1e-9))
@@ -118,7 +119,7 @@ def test_reset_restarts_the_schedule_at_the_closest_point(paper_path):
 
 
 def test_bad_input_names_the_field(paper_path):
-    tracker = TrajectoryTracker(paper_path, 1.5)
+    tracker = TrajectoryTracker(paper_path, 1.5, gains=Gains.paper(), compensation=Compensation.off())
     with pytest.raises(InputError) as exc:
         tracker.update((0.0, 0.0, 2.0), (0.0, 0.0, 0.0))
     assert exc.value.field == "time_s"
@@ -139,8 +140,8 @@ def test_bad_input_names_the_field(paper_path):
 def test_from_config_shares_the_followers_settings():
     from pf_offboard.control import PathFollower
 
-    f = PathFollower.from_config(config_path("px4-sih.yaml"))
-    t = TrajectoryTracker.from_config(config_path("px4-sih.yaml"))
+    f = PathFollower.from_config(load_config(config_path("px4-sih.yaml")))
+    t = TrajectoryTracker.from_config(load_config(config_path("px4-sih.yaml")))
     assert (t.speed, t.gains, t.yaw, t.limits) == (f.speed, f.gains, f.yaw, f.limits)
     assert t.compensator is not None and t.compensator.model == f.compensator.model
     assert isinstance(t.path, Path) and t.path.length_m == f.path.length_m
@@ -154,8 +155,8 @@ def test_with_the_compensator_the_lag_lead_replaces_the_rate_feed_forward(paper_
 
     lam0 = 0.3 * paper_path.lam_max
     y0, v0 = paper_path.eval(lam0).sigma, 1.5 * paper_path.frame(lam0).t
-    plain, _, _, _ = fly(TrajectoryTracker(paper_path, 1.5), y0, v0, 1.0)
+    plain, _, _, _ = fly(TrajectoryTracker(paper_path, 1.5, gains=Gains.paper(), compensation=Compensation.off()), y0, v0, 1.0)
     model = VehicleModel(accel_lag_xy_s=0.1, accel_lag_z_s=0.05, accel_delay_s=0.1)
-    comp, _, _, _ = fly(TrajectoryTracker(paper_path, 1.5, compensator=InnerLoopCompensator(model)), y0, v0, 1.0)
+    comp, _, _, _ = fly(TrajectoryTracker(paper_path, 1.5, gains=Gains.paper(), compensator=InnerLoopCompensator(model)), y0, v0, 1.0)
     assert max(float(np.linalg.norm(c.body_rates[:2])) for c in plain) > 0.1
     assert max(float(np.abs(c.body_rates).max()) for c in comp) < 1e-12

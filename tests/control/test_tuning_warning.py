@@ -36,8 +36,12 @@ def test_the_papers_gains_are_flagged_for_a_real_vehicle():
     assert "6 Hz" in msg and "typical" in msg and "ideal" in msg and "without the inner-loop compensation" in msg
     assert "-177 / -80 deg" in msg
     # with the compensation on a typical model (the shipped path configs before gains: auto)
-    msg = real_vehicle_warning(Gains(), VehicleModel.typical(), compensated=True)
+    msg = real_vehicle_warning(Gains.paper(), VehicleModel.typical(), compensated=True)
     assert msg is not None and "-25 / 28 deg" in msg and "lag 0.1 s, delay 0.1 s" in msg
+
+
+def test_the_default_gains_are_not_flagged():
+    assert real_vehicle_warning(Gains(), VehicleModel.typical(), compensated=True) is None
 
 
 @pytest.mark.parametrize("name", ["px4-sih", "arducopter", "figure8", "helix", "racetrack", "straight"])

@@ -133,11 +133,20 @@ SIH = "px4-sih"
 def sih_path_logs(tmp_path_factory) -> list[Path]:
     from pf_offboard.sim import simulate
 
+    import yaml
+
+    # px4-sih.yaml without the start ramp: the unramped start's tilt step is excitation these fits
+    # were calibrated on (with the ramp the 20 s logs carry less: vertical drag 1.107 on seed 1,
+    # and the tilt's share of the vertical rise below the third digit on seeds 2-3)
+    data = yaml.safe_load((REPO / "configs" / "px4-sih.yaml").read_text())
+    data["limits"]["max_tangential_accel_m_s2"] = None
+    config = tmp_path_factory.mktemp("sih-config") / "px4-sih-unramped.yaml"
+    config.write_text(yaml.safe_dump(data))
     logs = []
     for seed in (1, 2, 3):
         out = tmp_path_factory.mktemp(f"sih-path-{seed}")
         spec = SimSpec(vehicle=SIH, duration_s=20.0, seed=seed, epoch_unix_s=1.7e9)
-        logs.append(simulate(REPO / "configs" / "px4-sih.yaml", spec, out).paths.tlog)
+        logs.append(simulate(config, spec, out).paths.tlog)
     return logs
 
 
@@ -157,7 +166,8 @@ def test_path_logs_of_the_noisy_preset_fit_within_10_percent_with_the_position_c
               f" {plain.rise_63_s:.3f}) gain {fit.z.gain:.3f} drag {fit.z.drag_1_s:.3f}")  # fmt: skip
         for f in (fit.xy, fit.z):
             assert f.gain == pytest.approx(1.0, rel=0.10)
-            assert f.drag_1_s == pytest.approx(params.drag_1_s, rel=0.10)
+        assert fit.xy.drag_1_s == pytest.approx(params.drag_1_s, rel=0.10)
+        assert fit.z.drag_1_s == pytest.approx(params.drag_1_s, rel=0.10)
         assert fit.xy.rise_63_s == pytest.approx(rise_xy, rel=0.10)
         assert fit.z.measured_tilt_share == 1.0
         assert rise_z * 0.9 <= fit.z.rise_63_s <= rise_z * 1.6  # closed-loop noise bias, above

@@ -180,7 +180,9 @@ def test_spec_checks() -> None:
 def test_laps_end_the_flight(tmp_path: Path, soft_paper: Path) -> None:
     from pf_offboard.control import PathFollower
 
-    length_m = PathFollower.from_config(soft_paper).path.length_m
+    from pf_offboard.config import load_config
+
+    length_m = PathFollower.from_config(load_config(soft_paper)).path.length_m
     spec = SimSpec(vehicle="fast", start_enu_m=(0.0, -1.5, 2.0), rate_hz=50.0, laps=0.2, epoch_unix_s=EPOCH)
     result = simulate(soft_paper, spec, tmp_path)
     assert result.reason == "0.2 laps done"

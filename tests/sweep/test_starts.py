@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from pf_offboard.config import load_config
 from pf_offboard.control import PathFollower
 from pf_offboard.errors import InputError
 from pf_offboard.sweep.starts import StartRanges, flight_rng, sample_start
@@ -16,7 +17,7 @@ from .helpers import PAPER
 
 @pytest.fixture(scope="module")
 def path():  # type: ignore[no-untyped-def]
-    return PathFollower.from_config(PAPER).path
+    return PathFollower.from_config(load_config(PAPER)).path
 
 
 def test_flight_generator_is_the_spawned_child() -> None:
