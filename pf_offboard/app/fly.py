@@ -127,7 +127,10 @@ def _heights_from_config(args: argparse.Namespace, config: Any) -> None:
     """Fill ``--takeoff`` / ``--throw`` given without a height from ``flight:``."""
     flight = getattr(config, "flight", None)
     if args.takeoff is FROM_CONFIG:
-        args.takeoff = getattr(flight, "takeoff_altitude_m", None)
+        # a planning tool's take-off item (QGroundControl's take-off altitude) first, then flight:
+        geodetic = getattr(getattr(config, "path", None), "geodetic", None)
+        planned = getattr(geodetic, "takeoff_alt_m", None)
+        args.takeoff = planned if planned is not None else getattr(flight, "takeoff_altitude_m", None)
         if args.takeoff is None:
             raise InputError("--takeoff", "no height given and the config has no flight.takeoff_altitude_m")
     if args.throw is FROM_CONFIG:
@@ -169,6 +172,20 @@ def envelope_fence(config: Any) -> Any:
         if why:
             raise InputError("safety", why)
     return fence
+
+
+def _takeoff_height(config: Any, fence: Any, height_m: float, stream: TextIO) -> float:
+    """The take-off height, raised to the path's fence floor (or lowered below its ceiling) so
+    that following never starts in an envelope breach; says so on ``stream`` when it changes."""
+    from pf_offboard.safety import takeoff_height_in_fence
+
+    safety = getattr(config, "safety", None)
+    if safety is None or not safety.enabled:
+        return height_m
+    height, note = takeoff_height_in_fence(fence if fence is not None else envelope_fence(config), height_m)
+    if note:
+        print(f"pf-offboard fly: {note}", file=stream)
+    return height
 
 
 def _rate_bound(config: Any) -> float | None:
@@ -321,6 +338,8 @@ async def _fly(
 
         launch = "takeoff" if args.takeoff is not None else "throw" if args.throw is not None else "airborne"
         height = args.takeoff if args.takeoff is not None else args.throw if args.throw is not None else math.nan
+        if launch == "takeoff":
+            height = _takeoff_height(config, fence, height, stream)
         path = follower.path
         options = BridgeOptions(
             launch=launch,
