@@ -13,6 +13,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from pf_offboard import __version__
 from pf_offboard.errors import InputError
 
 # (name, module, one-line help): a fixed table, not a registry that modules mutate.
@@ -35,11 +36,14 @@ def build_parser() -> argparse.ArgumentParser:
         prog="pf-offboard",
         description="Time-invariant quadrotor path following (Kumar & Gill) over MAVLink.",
     )
+    version = f"pf-offboard {__version__}"
+    parser.add_argument("--version", action="version", version=version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, module_name, help_text in COMMANDS:
         module = importlib.import_module(module_name)
         p = sub.add_parser(name, help=help_text, description=help_text)
         module.add_arguments(p)
+        p.add_argument("--version", action="version", version=version)
         p.set_defaults(_run=module.run)
     return parser
 
