@@ -270,6 +270,19 @@ class ExcitationFollower:
 
 
 # ---------------------------------------------------------------------------------- identify --connect
+def excitation_status(line: str, follower: ExcitationFollower, record: Any, rate_hz: float) -> str:
+    """The status line of an excitation: it has no path (the path-following line would show
+    η1 nan), so its time and its offset from the start, after the line's mode and arming."""
+    if record is None or follower.start_position_enu_m is None or follower.start_time_s is None:
+        return line
+    head = line.split("  η1", 1)[0].split("  rate", 1)[0]
+    off = np.asarray(record.position_enu_m, dtype=float) - follower.start_position_enu_m
+    t = follower.excitation_time_s()
+    when = f"excitation {t:5.1f} s of {follower.spec.duration_s:.0f}" if t >= 0.0 else f"settling, excitation in {-t:.1f} s"
+    return (f"{head}  {when}  "
+            f"offset from the start E {off[0]:+5.2f} N {off[1]:+5.2f} U {off[2]:+5.2f} m  rate {rate_hz:5.0f} Hz")  # fmt: skip
+
+
 @dataclass(frozen=True)
 class ExciteOutcome:
     """How the excitation flight ended."""
@@ -378,7 +391,12 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
             if follower.abort_reason and bridge_box and step.record.mode == "following":
                 bridge_box[0].request_stop(f"excitation aborted: {follower.abort_reason}")
 
-        bridge = Bridge(link, profile, pipeline, options, 1.0, True, 1.0, on_step=on_step, status_stream=stream)
+        class ExcitationBridge(Bridge):
+            def status_text(self) -> str:
+                step = self.last_step
+                return excitation_status(super().status_text(), follower, None if step is None else step.record, self.loop_rate_hz)
+
+        bridge = ExcitationBridge(link, profile, pipeline, options, 1.0, True, 1.0, on_step=on_step, status_stream=stream)
         bridge_box.append(bridge)
         link.start_reading(bridge.on_message)
 
