@@ -13,7 +13,7 @@ import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("logs", nargs="*", metavar="LOG", help="fly / sim .tlog or .tlog.gz (several: fitted together)")
+    parser.add_argument("logs", nargs="*", metavar="LOG", help="fly / sim .tlog or .tlog.gz, or a PX4 ULog .ulg of an offboard flight (several: fitted together)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON instead of the report")
     parser.add_argument("--write-config", metavar="FILE",
                         help="write FILE with the identified vehicle: section (FILE or --config as the base, other sections kept)")  # fmt: skip
@@ -23,6 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fit the velocity made consistent with the position's derivative (time constant S s, as "
                              "flight.velocity_correction_s); for path-following logs of an estimator whose velocity drifts "
                              "from its position, e.g. PX4 SIH; not for hover excitations (default: as reported; docs/identify.md)")  # fmt: skip
+    parser.add_argument("--truth", action="store_true",
+                        help="a ULog from PX4's SIH simulator: fit its ground truth instead of the estimate (the airframe itself, "
+                             "without EKF2's error)")  # fmt: skip
     fly = parser.add_argument_group("excitation flight (--connect)")
     fly.add_argument("--connect", metavar="ENDPOINT", help="fly a 10-20 s excitation at hover first (like fly --connect), then fit its log")
     fly.add_argument("--config", metavar="YAML", help="with --connect: flight settings (output mode, rate); base of --write-config")
@@ -82,8 +85,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"pf-offboard identify: excitation aborted ({outcome.aborted}); fitting what was flown", file=sys.stderr)
         logs = [outcome.tlog]
     elif not logs:
-        raise InputError("LOG", "give at least one .tlog to fit, or --connect to fly an excitation")
-    data = [load_log(p, hover_thrust=args.hover_thrust, velocity_correction_s=correction) for p in logs]
+        raise InputError("LOG", "give at least one .tlog or .ulg to fit, or --connect to fly an excitation")
+    if args.truth and any(p.suffix.lower() != ".ulg" for p in logs):
+        raise InputError("--truth", "only a PX4 ULog (.ulg) from the SIH simulator carries ground truth")
+    data = [load_log(p, hover_thrust=args.hover_thrust, velocity_correction_s=correction, truth=args.truth) for p in logs]
     name = str(logs[0]) if len(logs) == 1 else f"{len(logs)} logs"
     ident = identify([s for d in data for s in d.segments], source=name)
     if args.json:
