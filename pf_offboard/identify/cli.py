@@ -28,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "without EKF2's error)")  # fmt: skip
     fly = parser.add_argument_group("excitation flight (--connect)")
     fly.add_argument("--connect", metavar="ENDPOINT", help="fly a 10-20 s excitation at hover first (like fly --connect), then fit its log")
-    fly.add_argument("--config", metavar="YAML", help="with --connect: flight settings (output mode, rate); base of --write-config")
+    fly.add_argument("--config", metavar="YAML", help="config file or shipped name: with --connect its flight settings (output mode, rate); base of --write-config")
     fly.add_argument("--takeoff", type=float, metavar="H", help="with --connect: arm and take off to H m first (default: the vehicle is airborne)")
     fly.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: flight.output_mode)")
     fly.add_argument("--duration", type=float, default=16.0, metavar="S", help="excitation length, s (default 16)")
@@ -63,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
     if correction is not None and not (math.isfinite(correction) and lo <= correction <= hi):
         raise InputError("--velocity-correction", f"must be in [{lo:g}, {hi:g}] s (flight.velocity_correction_s's range), got {correction}")
     logs = [Path(p) for p in args.logs]
+    if args.config:
+        from pf_offboard.shipped import resolve_config
+
+        args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     if args.connect:
         if logs:
             raise InputError("LOG", "give either logs to fit or --connect (which records its own), not both")
