@@ -150,11 +150,15 @@ def _heartbeat_active(msg: Any) -> bool:
 
 
 def _read_raw(path: Path) -> _Raw:
+    from pf_offboard.logs.flightlog import FlightLogPaths
+    from pf_offboard.logs.foreign import iter_tlog_lenient
     from pf_offboard.logs.tlog import iter_tlog
 
     raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], {}, None)
     last_lpn_t = -math.inf
-    for entry in iter_tlog(path):
+    # pf-offboard's own logs (its step log beside them) strictly; anyone else's (MAVProxy) leniently
+    ours = FlightLogPaths.beside(path).steps_csv.exists() or path.name.endswith(".gz")
+    for entry in iter_tlog(path) if ours else iter_tlog_lenient(path):
         msg = entry.message
         kind = msg.get_type()
         if entry.direction == "in":

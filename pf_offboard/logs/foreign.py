@@ -149,3 +149,37 @@ def step_records(track: ForeignTrack, follower: Any) -> list[Any]:
             sat_thrust=False, sat_approach_speed=False,
         ))  # fmt: skip
     return out
+
+
+def iter_tlog_lenient(path: str | Path, own_component_ids: tuple[int, ...] = (191,)) -> Any:
+    """A tlog read the way pymavlink reads any tlog (records it cannot decode are skipped), as
+    :class:`~pf_offboard.logs.tlog.TlogEntry` s: for logs that pf-offboard did not write (a
+    MAVProxy log of the companion's link, a ground station's). ``direction`` is "out" for
+    messages from ``own_component_ids`` (pf-offboard's 191, MAVSDK / MAVROS companions' 191 too)."""
+    from pymavlink import mavutil
+
+    from pf_offboard.logs.tlog import TlogEntry
+
+    p = Path(path)
+    if not p.exists():
+        raise InputError(str(p), "no such file")
+    try:
+        conn = mavutil.mavlink_connection(str(p), dialect="common", robust_parsing=True)
+    except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on a bad file
+        raise InputError(str(p), f"not readable as a tlog ({type(exc).__name__}: {exc})") from None
+    count = 0
+    while True:
+        try:
+            msg = conn.recv_msg()
+        except Exception:  # noqa: BLE001 - a damaged record: skip it
+            continue
+        if msg is None:
+            if count == 0:
+                raise InputError(str(p), "not a .tlog: no MAVLink message could be read from it")
+            return
+        if msg.get_type() == "BAD_DATA":
+            continue
+        count += 1
+        out = msg.get_srcComponent() in own_component_ids
+        yield TlogEntry(time_unix_s=float(getattr(msg, "_timestamp", 0.0)), message=msg, direction="out" if out else "in",
+                        offset=-1, frame=bytes(msg.get_msgbuf()))  # fmt: skip

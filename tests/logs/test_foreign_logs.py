@@ -52,6 +52,8 @@ def test_a_ground_stations_tlog_is_read_leniently(tmp_path) -> None:
     assert abs(np.sqrt(np.mean([r.cross_track_m**2 for r in mine])) - np.sqrt(np.mean([r.cross_track_m**2 for r in ours]))) < 0.01
     assert main(["plot", str(foreign), "--config", "px4-sih", "--out", str(tmp_path / "figs")]) == 0
     assert (tmp_path / "figs" / "map.png").exists()
+    # a MAVProxy log of the companion's link holds the setpoints too: identify fits it, garbage and all
+    assert main(["identify", str(foreign), "--json"]) == 0
 
 
 def test_replay_names_the_missing_log_and_refuses_a_ulog(tmp_path, capsys, monkeypatch) -> None:
