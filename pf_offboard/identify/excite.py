@@ -436,7 +436,10 @@ async def _excite(args: argparse.Namespace, endpoint: Any, config: Any, settings
         if log is not None:
             log.close()
     assert log is not None
-    print(f"pf-offboard identify: excitation flight: {result.reason} (exit {result.exit_code})", file=stream)
+    # the flight's own outcome; identify's exit code comes after the fit (a flight that ended well
+    # can still be too short or too poor to fit)
+    ended = "flown; fitting its log next" if result.exit_code == 0 else f"ended (exit {result.exit_code})"
+    print(f"pf-offboard identify: excitation flight {ended}: {result.reason}", file=stream)
     return ExciteOutcome(result.exit_code, result.reason, log.paths.tlog.parent, log.paths.tlog, follower.abort_reason)
 
 
