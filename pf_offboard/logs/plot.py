@@ -362,10 +362,31 @@ def plot_transversal(run: Run, out: Path) -> Path:
     return out
 
 
+def tracking_line(run: Run, settle_s: float = 8.0) -> str:
+    """How well a run followed its path: cross-track and speed-error RMS of the steps from
+    activation + ``settle_s`` to the end of that active stretch (for logs that carry no summary)."""
+    active = np.array([r.active for r in run.records])
+    if not active.any():
+        return f"{run.name}: never armed in OFFBOARD / GUIDED"
+    start = int(np.argmax(active))
+    stop = start + int(np.argmin(active[start:])) if not active[start:].all() else len(active)
+    t = run.t_s
+    window = (t >= t[start] + settle_s) & (np.arange(len(t)) < stop)
+    if window.sum() < 2:
+        return f"{run.name}: {t[stop - 1] - t[start]:.1f} s following, shorter than activation + {settle_s:g} s"
+    e = run.col("cross_track_m")[window]
+    dv = (run.col("eta2_m_s") - run.col("speed_ref_m_s"))[window]
+    return (f"{run.name}: from activation + {settle_s:g} s ({t[window][-1] - t[window][0]:.1f} s): cross-track RMS "
+            f"{100 * np.sqrt(np.mean(e**2)):.1f} cm, max {100 * np.max(e):.1f} cm; speed error RMS "
+            f"{100 * np.sqrt(np.mean(dv**2)):.1f} cm/s (speed along the path from the position's derivative)")  # fmt: skip
+
+
 def make_figures(
-    logs: Sequence[str | Path], out_dir: str | Path, config_path: str | Path | None = None, title: str | None = None
+    logs: Sequence[str | Path], out_dir: str | Path, config_path: str | Path | None = None, title: str | None = None,
+    report: list[str] | None = None,
 ) -> list[Path]:
-    """Write the figures for ``logs`` into ``out_dir``; returns the PNG paths."""
+    """Write the figures for ``logs`` into ``out_dir``; returns the PNG paths. ``report``: gets one
+    :func:`tracking_line` per run of a log without its own summary (ULogs, other senders' tlogs)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -374,7 +395,12 @@ def make_figures(
     cfg = Path(config_path) if config_path is not None else FlightLogPaths.beside(logs[0]).config_yaml
     if config_path is not None and not cfg.exists():
         raise InputError("--config", f"no such file: {cfg}")
-    runs = [run for p in logs for run in load_runs(p, cfg if cfg.exists() else None)]
+    runs = []
+    for p in logs:
+        loaded = load_runs(p, cfg if cfg.exists() else None)
+        if report is not None and _is_foreign(Path(p)):
+            report.extend(tracking_line(r) for r in loaded)
+        runs += loaded
     names = [r.name for r in runs]
     if len(set(names)) != len(names):  # two runs called "flight": number them
         runs = [Run(f"{r.name}{i + 1}", r.records, r.t_s, r.activation_s) for i, r in enumerate(runs)]
@@ -413,6 +439,9 @@ def run(args: argparse.Namespace) -> int:
 
         args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
     make_dir(args.out, "--out")
-    for png in make_figures(args.logs, args.out, args.config, args.title):
+    report: list[str] = []
+    for png in make_figures(args.logs, args.out, args.config, args.title, report):
         print(png)
+    for line in report:
+        print(line)
     return 0

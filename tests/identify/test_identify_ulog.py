@@ -47,3 +47,10 @@ def test_truth_needs_a_ulog_and_bad_logs_are_named(tmp_path, capsys) -> None:
     tlog.write_bytes(b"")
     assert main(["identify", str(tlog), "--truth"]) == 2
     assert "--truth: only a PX4 ULog" in capsys.readouterr().err
+
+
+def test_identify_takes_a_shipped_config_name_as_the_base(tmp_path, capsys) -> None:
+    out = tmp_path / "mine.yaml"
+    assert main(["identify", str(ULOG), "--config", "px4-sih", "--write-config", str(out)]) == 0, capsys.readouterr().err
+    written, shipped = load_config(out), load_config(Path(__file__).resolve().parents[2] / "configs" / "px4-sih.yaml")
+    assert written.path == shipped.path and written.vehicle != shipped.vehicle

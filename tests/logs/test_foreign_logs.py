@@ -22,6 +22,8 @@ def test_plot_draws_a_px4_ulog_with_its_ground_truth(tmp_path, capsys) -> None:
     assert main(["plot", str(ULOG), "--out", str(tmp_path)]) == 2
     assert f"{ULOG}: is a PX4 ULog: pass --config" in capsys.readouterr().err
     assert main(["plot", str(ULOG), "--config", "px4-sih", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "px4_sih_offboard: from activation + 8 s" in out and "px4_sih_offboard-truth: from activation + 8 s" in out
     names = sorted(p.name for p in tmp_path.glob("*.png"))
     assert names == ["map.png", "path3d.png", "px4_sih_offboard-truth_tangential.png", "px4_sih_offboard-truth_transversal.png",
                      "px4_sih_offboard_tangential.png", "px4_sih_offboard_transversal.png"]  # fmt: skip
