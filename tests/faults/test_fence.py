@@ -101,3 +101,28 @@ def test_a_takeoff_below_the_fence_floor_climbs_to_the_floor_instead_of_breachin
     assert outcome.exit_code == 0, (outcome.reason, text[-1500:])
     first = next(r for r in outcome.records if r.active)
     assert first.position_enu_m[2] >= 3.0  # following began inside the fence
+
+
+def test_a_plans_take_off_altitude_is_takeoffs_default(tmp_path) -> None:
+    """`--takeoff` without a height: the plan's take-off item's altitude (above home), else flight:."""
+    import argparse
+    import json
+    from pathlib import Path
+
+    from pf_offboard.app.fly import FROM_CONFIG, _heights_from_config
+    from pf_offboard.config import load_config
+
+    data_dir = Path(__file__).resolve().parents[1] / "data" / "geo"
+    plan = json.loads((data_dir / "mission.plan").read_text())
+    takeoff = next(item for item in plan["mission"]["items"] if item.get("command") == 22)
+    takeoff["params"][6] = 3.5
+    (tmp_path / "field.plan").write_text(json.dumps(plan))
+    (tmp_path / "field.yaml").write_text("path: {file: field.plan, altitude_reference: relative_home, closed: true}\n"
+                                         "flight: {takeoff_altitude_m: 2.5}\n")  # fmt: skip
+    args = argparse.Namespace(takeoff=FROM_CONFIG, throw=None)
+    _heights_from_config(args, load_config(tmp_path / "field.yaml"))
+    assert args.takeoff == 3.5
+    (tmp_path / "local.yaml").write_text("path: {waypoints: [[0, 0, 2], [4, 0, 2]]}\nflight: {takeoff_altitude_m: 2.5}\n")
+    args = argparse.Namespace(takeoff=FROM_CONFIG, throw=None)
+    _heights_from_config(args, load_config(tmp_path / "local.yaml"))
+    assert args.takeoff == 2.5
