@@ -60,3 +60,22 @@ def test_readme_fly_example_runs_up_to_the_real_vehicle(tmp_path, monkeypatch) -
             build_parser().parse_args(argv[1:])  # a real vehicle: the command line at least parses
             continue
         assert main(argv[1:]) == 0, line
+
+
+def test_readme_minimal_config_loads_and_flies_in_sim(tmp_path) -> None:
+    """The README's `field.yaml` (a path and a speed only) is valid and follows its path."""
+    import yaml
+
+    from pf_offboard.cli import main
+    from pf_offboard.config import parse_config
+
+    text = (ROOT / "README.md").read_text()
+    block = re.findall(r"```yaml\n(.+?)\n```", text, flags=re.S)[0]
+    parse_config(yaml.safe_load(block))
+    (tmp_path / "field.yaml").write_text(block)
+    assert main(["sim", "--config", str(tmp_path / "field.yaml"), "--laps", "2", "--out", str(tmp_path / "run"), "--json"]) == 0
+    import json
+
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())["summary"]
+    rms = next(v for k, v in summary.items() if k.startswith("cross_track_rms") and isinstance(v, (int, float)))
+    assert rms < 0.05
