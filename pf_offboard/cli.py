@@ -27,7 +27,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("plot", "pf_offboard.logs.plot", "paper-style figures (Figs. 4-9) from flight logs"),
     ("bench", "pf_offboard.bench", "benchmarks: controller cost, simulation speed, MAVLink latency"),
     ("configs", "pf_offboard.app.configs_cmd", "list the shipped configs (use a name with --config)"),
-    ("init", "pf_offboard.app.init_cmd", "write an editable copy of a shipped config"),
+    ("init", "pf_offboard.app.init_cmd", "write a config of your own: a path and a speed (or a copy of a shipped config)"),
 )
 
 

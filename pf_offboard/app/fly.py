@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True, metavar="YAML", help="config file, or a shipped config's name (pf-offboard configs)")
     launch = parser.add_mutually_exclusive_group(required=True)
     launch.add_argument("--takeoff", type=float, nargs="?", const=FROM_CONFIG, metavar="H",
-                        help="arm, take off to H metres (default flight.takeoff_altitude_m), then follow")  # fmt: skip
+                        help="arm, take off to H metres (default: a plan's take-off altitude, else flight.takeoff_altitude_m; raised to the path's fence floor), then follow")  # fmt: skip
     launch.add_argument("--airborne", action="store_true", help="the vehicle is flying: switch to OFFBOARD/GUIDED and follow")
     launch.add_argument("--throw", type=float, nargs="?", const=FROM_CONFIG, metavar="H",
                         help="activate when a thrown vehicle crosses H metres (default flight.throw_activation_height_m)")  # fmt: skip
