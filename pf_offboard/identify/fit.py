@@ -63,7 +63,7 @@ VERTICAL = GROUPS["z"]
 FLYABLE_R2 = 0.85
 STRONGER_EXCITATION = ("fit a path-following flight's log instead (pf-offboard identify LOG_DIR/flight.tlog, or a PX4 .ulg; "
                        "add --velocity-correction 0.3 on PX4 SIH), or fly a stronger, longer excitation "
-                       "(--amplitude 1.5 --duration 30 --box 2)")
+                       "(e.g. --amplitude 1.5 --box 2)")
 # Integral-equation window (s). Short windows time the response sharply and difference out an
 # estimate error that drifts slower than they last: on 20 s path logs of the noisy `px4-sih` mock
 # (velocity made position-consistent, eight seeds) 0.2 s gave the xy rise within 5 % and gain and

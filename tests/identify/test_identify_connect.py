@@ -54,7 +54,7 @@ def test_excitation_flight_is_bounded_and_identifies_the_mock(tmp_path, capsys) 
     recs = [r for r in read_steplog(tmp_path / "log" / "identify.csv") if r.active]
     pos = np.array([r.position_enu_m for r in recs])
     start = np.array([HOVER_NED[1], HOVER_NED[0], -HOVER_NED[2]])
-    assert np.max(np.abs(pos - start)) < 1.0
+    assert np.max(np.abs(pos - start)) < 1.5  # the default --box
     assert recs[-1].time_s - recs[0].time_s > 14.0  # settle + excitation flown in full
     params = preset("px4-default")
     rise_xy = accel_step_rise_time_s(params, (1.0, 0.0, 0.0))
