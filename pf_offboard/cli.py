@@ -27,7 +27,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("plot", "pf_offboard.logs.plot", "paper-style figures (Figs. 4-9) from flight logs"),
     ("bench", "pf_offboard.bench", "benchmarks: controller cost, simulation speed, MAVLink latency"),
     ("configs", "pf_offboard.app.configs_cmd", "list the shipped configs (use a name with --config)"),
-    ("init", "pf_offboard.app.init_cmd", "write an editable copy of a shipped config"),
+    ("init", "pf_offboard.app.init_cmd", "write a config of your own: a path and a speed (or a copy of a shipped config)"),
 )
 
 
@@ -53,10 +53,12 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         prog="pf-offboard",
         description="Time-invariant quadrotor path following (Kumar & Gill) over MAVLink.",
     )
-    parser.add_argument("--version", action="version", version=f"pf-offboard {__version__}")
+    version = f"pf-offboard {__version__}"
+    parser.add_argument("--version", action="version", version=version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, module_name, help_text in COMMANDS:
         p = sub.add_parser(name, help=help_text, description=help_text)
+        p.add_argument("--version", action="version", version=version)
         if command is None or name == command:
             module = importlib.import_module(module_name)
             module.add_arguments(p)

@@ -67,6 +67,7 @@ class GeodeticSource:
     origin: GeoPoint | None = None
     home_alt_amsl_m: float | None = None  # relative_home: home's altitude (default: the origin's)
     skipped: tuple[str, ...] = ()
+    takeoff_alt_m: float | None = None  # the file's take-off altitude above home (a plan's take-off item)
 
 
 @dataclass(frozen=True)
@@ -320,6 +321,7 @@ def _geodetic_path(d: Mapping[str, Any], closed: bool, moving: str, base_dir: st
         waypoints_lat_lon_alt=tuple((w.lat_deg, w.lon_deg, w.alt_m) for w in geo.waypoints),
         names=tuple(w.where for w in geo.waypoints),
         skipped=geo.skipped,
+        takeoff_alt_m=geo.takeoff_alt_m,
     )
     path = PathConfig((), closed, "enu", moving, source)
     return _localise(path, origin, None) if origin is not None else path

@@ -50,8 +50,25 @@ _FRAME_REFERENCE = {
     MAV_FRAME_GLOBAL_RELATIVE_ALT: "relative_home",
     MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: "relative_home",
 }
-_COMMAND_NAMES = {20: "return to launch", 21: "land", 22: "take-off", 178: "speed change", 177: "jump", 206: "camera trigger distance"}
-_FRAME_NAMES = {10: "terrain-relative (MAV_FRAME_GLOBAL_TERRAIN_ALT)", 11: "terrain-relative (MAV_FRAME_GLOBAL_TERRAIN_ALT_INT)"}
+MAV_CMD_NAV_TAKEOFF = 22
+_RELATIVE_FRAMES = (MAV_FRAME_GLOBAL_RELATIVE_ALT, MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+_TERRAIN_FRAMES = (10, 11)  # MAV_FRAME_GLOBAL_TERRAIN_ALT(_INT)
+
+
+def command_name(command: int) -> str:
+    """A MAV_CMD's name from pymavlink's enums ("NAV_TAKEOFF"), or "command N" if unknown."""
+    from pymavlink.dialects.v20 import common
+
+    entry = common.enums["MAV_CMD"].get(command)
+    return entry.name.removeprefix("MAV_CMD_") if entry is not None else f"command {command}"
+
+
+def frame_name(frame: int) -> str:
+    """A MAV_FRAME's name from pymavlink's enums ("GLOBAL_TERRAIN_ALT"), or "frame N" if unknown."""
+    from pymavlink.dialects.v20 import common
+
+    entry = common.enums["MAV_FRAME"].get(frame)
+    return entry.name.removeprefix("MAV_FRAME_") if entry is not None else f"frame {frame}"
 # Mission commands that are not a place to fly through: skipped and reported (DO_*, CONDITION_*),
 # and take-off / land / return (the app takes off itself with --takeoff and hands back at the end).
 _NON_POSITIONAL = set(range(112, 160)) | set(range(176, 253)) | set(range(3000, 3100)) | {20, 21, 22}
@@ -88,6 +105,7 @@ class GeoPath:
     waypoints: tuple[GeoWaypoint, ...]
     altitude_reference: str | None
     skipped: tuple[str, ...] = ()
+    takeoff_alt_m: float | None = None  # the plan's take-off altitude above home (m), when it has one
 
     def lat_lon_alt(self) -> np.ndarray:
         """(N, 3) [lat_deg, lon_deg, alt_m] as in the file."""
@@ -158,7 +176,7 @@ def _frame_reference(frame: object, source: str, where: str) -> str:
     if isinstance(frame, bool) or not isinstance(frame, int):
         raise PathFileError(source, where, f"frame must be an integer, got {frame!r}")
     if frame not in _FRAME_REFERENCE:
-        name = _FRAME_NAMES.get(frame, f"frame {frame}")
+        name = f"terrain-relative frame {frame} ({frame_name(frame)})" if frame in _TERRAIN_FRAMES else f"frame {frame} ({frame_name(frame)})"
         raise PathFileError(source, where, f"{name} is not supported: use altitudes relative to home (frame 3) or AMSL (frame 0)")
     return _FRAME_REFERENCE[frame]
 
@@ -198,6 +216,7 @@ def parse_plan(text: str, source: str = "<plan>") -> GeoPath:
     waypoints: list[GeoWaypoint] = []
     refs: list[tuple[str, str]] = []
     skipped: list[str] = []
+    takeoff_alt_m: float | None = None
     for i, item in enumerate(items):
         where = f"item {i}"
         if not isinstance(item, dict):
@@ -212,55 +231,80 @@ def parse_plan(text: str, source: str = "<plan>") -> GeoPath:
         if isinstance(command, bool) or not isinstance(command, int):
             raise PathFileError(source, where, f"command must be an integer, got {command!r}")
         if command != MAV_CMD_NAV_WAYPOINT:
+            params = item.get("params")
+            if (command == MAV_CMD_NAV_TAKEOFF and takeoff_alt_m is None and item.get("frame") in _RELATIVE_FRAMES
+                    and isinstance(params, list) and len(params) == 7):
+                takeoff_alt_m = _coordinate(params[6], source, where, "take-off altitude")
             if command in _NON_POSITIONAL:
-                skipped.append(f"{where} ({_COMMAND_NAMES.get(command, f'command {command}')})")
+                skipped.append(f"{where} ({command_name(command)})")
                 continue
-            raise PathFileError(source, where, f"mission command {command} is not a way-point (MAV_CMD_NAV_WAYPOINT, 16): "
+            raise PathFileError(source, where, f"mission command {command_name(command)} ({command}) is not a way-point (MAV_CMD_NAV_WAYPOINT, 16): "
                                 "remove take-off / land / loiter / return items, the app flies way-points only")  # fmt: skip
         params = item.get("params")
         if not isinstance(params, list) or len(params) != 7:
             raise PathFileError(source, where, "params must be a list of 7 numbers")
         refs.append((where, _frame_reference(item.get("frame"), source, where)))
         waypoints.append(_waypoint(params[4], params[5], params[6], source, where))
-    return GeoPath(source, "plan", tuple(waypoints), _one_reference(refs, source), tuple(skipped))
+    return GeoPath(source, "plan", tuple(waypoints), _one_reference(refs, source), tuple(skipped), takeoff_alt_m)
 
 
 def parse_waypoints(text: str, source: str = "<waypoints>") -> GeoPath:
-    """A ``QGC WPL 110`` file: ``INDEX CURRENT FRAME COMMAND P1 P2 P3 P4 LAT LON ALT AUTOCONTINUE``
-    (tab separated). Line 0 after the header is home, not a way-point."""
+    """A Mission Planner / QGroundControl way-point file, ``QGC WPL 110`` or the older ``QGC WPL
+    100``, read with pymavlink's :class:`~pymavlink.mavwp.MAVWPLoader`. The first entry is home,
+    not a way-point. Problems the loader would report without a line number (a wrong field
+    count, a field that is not a number) are named by line first."""
+    import tempfile
+
+    from pymavlink import mavwp
+
     lines = text.splitlines()
-    if not lines or not lines[0].strip().startswith("QGC WPL 110"):
-        raise PathFileError(source, "line 1", "not a QGC WPL 110 way-point file (first line must be 'QGC WPL 110')")
+    header = lines[0].strip() if lines else ""
+    fields_per_line = {"QGC WPL 110": 12, "QGC WPL 100": 13}.get(header)
+    if fields_per_line is None:
+        raise PathFileError(source, "line 1", "not a QGC WPL 110 (or 100) way-point file (first line must be 'QGC WPL 110')")
+    entry_lines: list[int] = []
+    for n, line in enumerate(lines[1:], start=2):
+        if not line.strip() or line.startswith("#"):
+            continue
+        fields = line.split()
+        if len(fields) != fields_per_line:
+            layout = "INDEX CURRENT FRAME COMMAND P1..P4 LAT LON ALT AUTOCONTINUE" if fields_per_line == 12 else "the 13 fields of WPL 100"
+            raise PathFileError(source, f"line {n}", f"expected {fields_per_line} fields ({layout}), got {len(fields)}")
+        try:
+            [float(f) for f in fields]
+        except ValueError:
+            raise PathFileError(source, f"line {n}", "every field must be a number") from None
+        entry_lines.append(n)
+    loader = mavwp.MAVWPLoader()
+    with tempfile.TemporaryDirectory() as tmp:  # the loader reads a file by name
+        copy = Path(tmp) / "mission.waypoints"
+        copy.write_text(text, encoding="utf-8")
+        try:
+            loader.load(str(copy))
+        except (mavwp.MAVWPError, ValueError) as exc:
+            raise PathFileError(source, "", f"pymavlink cannot read it: {exc}") from None
+    items = [loader.wp(i) for i in range(loader.count())]
     waypoints: list[GeoWaypoint] = []
     refs: list[tuple[str, str]] = []
     skipped: list[str] = []
-    seen_home = False
-    for n, line in enumerate(lines[1:], start=2):
+    takeoff_alt_m: float | None = None
+    for k, (item, n) in enumerate(zip(items, entry_lines)):
         where = f"line {n}"
-        if not line.strip():
-            continue
-        stripped = line.strip()  # trailing tabs / blanks some tools write
-        fields = stripped.split("\t") if "\t" in stripped else stripped.split()
-        if len(fields) != 12:
-            raise PathFileError(source, where, f"expected 12 fields (INDEX CURRENT FRAME COMMAND P1..P4 LAT LON ALT AUTOCONTINUE), got {len(fields)}")
-        try:
-            index, _current, frame, command = (int(f) for f in fields[:4])
-            lat, lon, alt = (float(f) for f in fields[8:11])
-        except ValueError:
-            raise PathFileError(source, where, "INDEX, CURRENT, FRAME, COMMAND must be integers and LAT LON ALT numbers") from None
-        if not seen_home:
-            seen_home = True
-            if index != 0:
-                raise PathFileError(source, where, f"the first entry must be the home position (index 0), got index {index}")
+        if k == 0:
+            if item.seq != 0:
+                raise PathFileError(source, where, f"the first entry must be the home position (index 0), got index {item.seq}")
             continue  # home: where the vehicle was when the plan was made, not a place to fly through
+        command = int(item.command)
         if command != MAV_CMD_NAV_WAYPOINT:
+            if command == MAV_CMD_NAV_TAKEOFF and item.frame in _RELATIVE_FRAMES and takeoff_alt_m is None:
+                takeoff_alt_m = float(item.z)
             if command in _NON_POSITIONAL:
-                skipped.append(f"{where} ({_COMMAND_NAMES.get(command, f'command {command}')})")
+                skipped.append(f"{where} ({command_name(command)})")
                 continue
-            raise PathFileError(source, where, f"mission command {command} is not a way-point (MAV_CMD_NAV_WAYPOINT, 16)")
-        refs.append((where, _frame_reference(frame, source, where)))
-        waypoints.append(_waypoint(lat, lon, alt, source, where))
-    return GeoPath(source, "waypoints", tuple(waypoints), _one_reference(refs, source), tuple(skipped))
+            raise PathFileError(source, where, f"mission command {command_name(command)} is not a way-point (MAV_CMD_NAV_WAYPOINT, 16)")
+        refs.append((where, _frame_reference(int(item.frame), source, where)))
+        waypoints.append(_waypoint(item.x, item.y, item.z, source, where))
+    return GeoPath(source, "waypoints", tuple(waypoints), _one_reference(refs, source), tuple(skipped), takeoff_alt_m)
 
 
 _CSV_NAMES = {

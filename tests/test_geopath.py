@@ -38,7 +38,7 @@ def test_plan_and_waypoints_skip_takeoff_speed_and_return_items() -> None:
     assert [s.split(" (")[0] for s in plan.skipped] == ["item 0", "item 1", "item 9"]
     assert plan.waypoints[0].where == "item 2"
     wpl = read_geopath(DATA / "mission.waypoints")
-    assert wpl.altitude_reference == "relative_home" and wpl.skipped == ("line 3 (take-off)",)
+    assert wpl.altitude_reference == "relative_home" and wpl.skipped == ("line 3 (NAV_TAKEOFF)",)
     assert len(wpl.waypoints) == 7  # home (index 0) is not a way-point
 
 
@@ -93,7 +93,7 @@ BAD_PLANS = [
     (_set(3, "frame", 10), "item 3", "terrain"),
     (_param(5, 4, 95.0), "item 5", "latitude 95"),
     (_param(6, 5, "x"), "item 6", "longitude must be a number"),
-    (_set(2, "command", 17), "item 2", "mission command 17"),
+    (_set(2, "command", 17), "item 2", "mission command NAV_LOITER_UNLIM (17)"),
     (_set(7, "type", "ComplexItem"), "item 7", "complex item"),
 ]
 
@@ -113,7 +113,7 @@ BAD_TEXT = [
     ("bad.csv", "lat,lon,alt\n-35.1,149.1,2\n-35.1,abc,2\n", "line 3", "lon 'abc' is not a number"),
     ("bad.waypoints", "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.36\t149.16\t584\t1\n1\t0\t3\t16\t0\t0\t0\t0\t-35.36\t149.16\t2\n",
      "line 3", "expected 12 fields"),
-    ("bad.waypoints", "QGC WPL 100\n", "line 1", "not a QGC WPL 110"),
+    ("bad.waypoints", "QGC WPL 99\n", "line 1", "not a QGC WPL 110 (or 100)"),
     ("bad.geojson", '{"type": "LineString", "coordinates": [[149.1, -35.1, 2], [149.1, -35.2]]}', "position 1", "no altitude"),
     ("bad.geojson", '{"type": "LineString", "coordinates": [[149.1, -35.1, 2], \n [149.1 -35.2]]}', "line 2", "not valid JSON"),
     ("bad.plan", '{"fileType": "Plan", "mission": {"items": [}}', "line 1", "not valid JSON"),
@@ -203,3 +203,32 @@ def test_sim_needs_an_origin(tmp_path, capsys) -> None:
     p = _config(tmp_path, "path:\n  file: SAMPLE\n  altitude_reference: relative_home\n  closed: true\n")
     assert main(["sim", "--config", str(p), "--out", str(tmp_path / "o")]) == 2
     assert "path.origin" in capsys.readouterr().err
+
+
+def _wpl100(text_110: str) -> str:
+    """The same mission in the older QGC WPL 100 layout (action codes 25 way-point, 24 take-off)."""
+    out = ["QGC WPL 100"]
+    actions = {16: 25, 22: 24}
+    for line in text_110.splitlines()[1:]:
+        seq, current, frame, cmd, p1, p2, p3, p4, lat, lon, alt, auto = line.split()
+        out.append("\t".join([seq, frame, str(actions[int(cmd)]), p3, p4, p1, p2, current, lon, lat, alt, "0", auto]))
+    return "\n".join(out) + "\n"
+
+
+def test_waypoints_100_and_110_read_alike_through_pymavlink(tmp_path) -> None:
+    v110 = read_geopath(DATA / "mission.waypoints")
+    p = tmp_path / "old.waypoints"
+    p.write_text(_wpl100((DATA / "mission.waypoints").read_text()))
+    v100 = read_geopath(p)
+    assert v100.lat_lon_alt().tolist() == v110.lat_lon_alt().tolist()
+    assert v100.skipped == v110.skipped == ("line 3 (NAV_TAKEOFF)",)
+    assert v100.takeoff_alt_m == v110.takeoff_alt_m == 2.0  # the take-off item's altitude above home
+
+
+def test_plan_take_off_altitude_is_read_and_commands_are_named_from_pymavlink() -> None:
+    from pf_offboard.geopath import command_name, frame_name
+
+    plan = read_geopath(DATA / "mission.plan")
+    assert plan.takeoff_alt_m is not None and plan.takeoff_alt_m > 0
+    assert command_name(22) == "NAV_TAKEOFF" and command_name(206) == "DO_SET_CAM_TRIGG_DIST"
+    assert command_name(65000) == "command 65000" and frame_name(10) == "GLOBAL_TERRAIN_ALT"

@@ -71,7 +71,7 @@ def test_entry_point_lists_the_configs_from_anywhere(installed: Path, tmp_path: 
     assert listed == {n.removesuffix(".yaml") for n in SHIPPED}
     r = _run(installed, tmp_path, installed / "bin" / "pf-offboard", "init", "mine", "--from", "helix")
     assert r.returncode == 0, r.stderr
-    assert (tmp_path / "mine.yaml").read_text().startswith("# mine: your copy of the shipped config \"helix\"")
+    assert (tmp_path / "mine.yaml").read_text().startswith("# mine: your config (written by `pf-offboard init` from \"helix\")")
 
 
 def test_demo_flies_from_an_empty_directory_and_writes_its_logs_there(installed: Path, tmp_path: Path) -> None:

@@ -45,14 +45,24 @@ def test_init_writes_a_commented_copy_and_never_overwrites(tmp_path, monkeypatch
     monkeypatch.chdir(tmp_path)
     assert main(["init", "myfield"]) == 0
     text = (tmp_path / "myfield.yaml").read_text()
-    assert text.startswith('# myfield: your copy of the shipped config "paper"')
-    assert "# The paper's experiment" in text  # the shipped comments are kept
-    assert load_config(tmp_path / "myfield.yaml").path == load_config(resolve_config("paper")).path
+    assert text.startswith("# myfield: your config")
+    mine = load_config(tmp_path / "myfield.yaml")
+    assert mine.path.waypoints_enu_m == load_config(resolve_config("paper")).path.waypoints_enu_m
+    assert mine.gains_auto and mine.compensation.enabled  # the default, not the paper's gains
+    assert "note:" not in capsys.readouterr().err  # the default needs no caution
     assert main(["init", "myfield"]) == 2
     assert "exists (pass --force" in capsys.readouterr().err
     assert main(["init", "x", "--from", "helix", "--out", str(tmp_path / "sub" / "h.yaml")]) == 0
     assert load_config(tmp_path / "sub" / "h.yaml").path.closed is False
     assert main(["init", "y", "--from", "nosuch"]) == 2
+
+
+def test_init_from_paper_says_what_the_papers_gains_need(tmp_path, monkeypatch, capsys) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main(["init", "p", "--from", "paper"]) == 0
+    err = capsys.readouterr().err
+    assert "note:" in err and "phase margin" in err and "--vehicle fast" in err
+    assert "# The paper's experiment" in (tmp_path / "p.yaml").read_text()  # the shipped comments are kept
 
 
 def test_fly_accepts_a_shipped_name(capsys) -> None:

@@ -519,6 +519,7 @@ class Vehicle:
                 if log is not None and hooks.config_path is not None:
                     log.write_config(hooks.config_path, config)
             estimator = Estimator(settings.state_source, fs.velocity_correction_s)
+            height_m = settings.height_m
             if config is None:
                 follower: Any = hooks.follower_factory(estimator) if hooks.follower_factory is not None else _NoFollower()
                 length, closed, lam_max = 1.0, True, 1.0
@@ -531,10 +532,18 @@ class Vehicle:
                 path = follower.path
                 length, closed, lam_max = path.length_m, path.closed, path.lam_max
                 safety = getattr(config, "safety", None) or SafetyConfig()
-                monitor = EnvelopeMonitor(safety, fence if fence is not None else envelope_fence(config), path.length_m, path.closed)
+                fence = fence if fence is not None else envelope_fence(config)
+                monitor = EnvelopeMonitor(safety, fence, path.length_m, path.closed)
+                if settings.launch == "takeoff" and safety.enabled:
+                    # a take-off below the path's fence floor would arm into a breach: climb into it
+                    from pf_offboard.safety import takeoff_height_in_fence
+
+                    height_m, note = takeoff_height_in_fence(fence, settings.height_m)
+                    if note:
+                        print(f"pf-offboard: {note}", file=self.stream)
             options = FlightOptions(
                 launch=settings.launch,
-                height_m=settings.height_m,
+                height_m=height_m,
                 end=EndSpec(laps=settings.laps, duration_s=settings.duration_s, open_path_end=settings.open_path_end),
                 end_action=fs.end_action,
                 setpoint_rate_hz=fs.setpoint_rate_hz,

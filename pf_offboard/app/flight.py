@@ -108,6 +108,7 @@ class Flight:
         self.on_step = on_step
         self.clock = clock
         self.phase = Phase.PREFLIGHT
+        self.status_hook: Callable[[str, Any], str] | None = None
         self.display = StatusDisplay(status_stream if status_stream is not None else sys.stderr, options.status, clock)
         self.waiter = Waiter(clock, lambda: self.phase in INTERRUPTING)
         self.modes = ModeWatch(profile, clock)
@@ -699,7 +700,9 @@ class Flight:
         await self.display.run(self.status_text, lambda: self.phase not in TERMINAL)
 
     def status_text(self) -> str:
-        return status_text(self.phase.value, self.modes.mode_name(), self.modes.armed, self.last_step, self.laps.laps, self.loop_rate_hz)
+        line = status_text(self.phase.value, self.modes.mode_name(), self.modes.armed, self.last_step, self.laps.laps, self.loop_rate_hz)
+        # a flight without a path (identify's excitation) words its own line: (line, flight) -> line
+        return self.status_hook(line, self) if self.status_hook is not None else line
 
 
 class _TakeoffOps:

@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True, metavar="YAML", help="config file, or a shipped config's name (pf-offboard configs)")
     launch = parser.add_mutually_exclusive_group(required=True)
     launch.add_argument("--takeoff", type=float, nargs="?", const=FROM_CONFIG, metavar="H",
-                        help="arm, take off to H metres (default flight.takeoff_altitude_m), then follow")  # fmt: skip
+                        help="arm, take off to H metres (default: a plan's take-off altitude, else flight.takeoff_altitude_m; raised to the path's fence floor), then follow")  # fmt: skip
     launch.add_argument("--airborne", action="store_true", help="the vehicle is flying: switch to OFFBOARD/GUIDED and follow")
     launch.add_argument("--throw", type=float, nargs="?", const=FROM_CONFIG, metavar="H",
                         help="activate when a thrown vehicle crosses H metres (default flight.throw_activation_height_m)")  # fmt: skip
@@ -84,7 +84,10 @@ def _heights_from_config(args: argparse.Namespace, config: Any) -> None:
     """Fill ``--takeoff`` / ``--throw`` given without a height from ``flight:``."""
     flight = getattr(config, "flight", None)
     if args.takeoff is FROM_CONFIG:
-        args.takeoff = getattr(flight, "takeoff_altitude_m", None)
+        # a planning tool's take-off item (QGroundControl's take-off altitude) first, then flight:
+        geodetic = getattr(getattr(config, "path", None), "geodetic", None)
+        planned = getattr(geodetic, "takeoff_alt_m", None)
+        args.takeoff = planned if planned is not None else getattr(flight, "takeoff_altitude_m", None)
         if args.takeoff is None:
             raise InputError("--takeoff", "no height given and the config has no flight.takeoff_altitude_m")
     if args.throw is FROM_CONFIG:

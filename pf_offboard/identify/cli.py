@@ -13,7 +13,7 @@ import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("logs", nargs="*", metavar="LOG", help="fly / sim .tlog or .tlog.gz (several: fitted together)")
+    parser.add_argument("logs", nargs="*", metavar="LOG", help="fly / sim .tlog or .tlog.gz, or a PX4 ULog .ulg of an offboard flight (several: fitted together)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON instead of the report")
     parser.add_argument("--write-config", metavar="FILE",
                         help="write FILE with the identified vehicle: section (FILE or --config as the base, other sections kept)")  # fmt: skip
@@ -23,16 +23,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fit the velocity made consistent with the position's derivative (time constant S s, as "
                              "flight.velocity_correction_s); for path-following logs of an estimator whose velocity drifts "
                              "from its position, e.g. PX4 SIH; not for hover excitations (default: as reported; docs/identify.md)")  # fmt: skip
+    parser.add_argument("--truth", action="store_true",
+                        help="a ULog from PX4's SIH simulator: fit its ground truth instead of the estimate (the airframe itself, "
+                             "without EKF2's error)")  # fmt: skip
     fly = parser.add_argument_group("excitation flight (--connect)")
-    fly.add_argument("--connect", metavar="ENDPOINT", help="fly a 10-20 s excitation at hover first (like fly --connect), then fit its log")
-    fly.add_argument("--config", metavar="YAML", help="with --connect: flight settings (output mode, rate); base of --write-config (a file or a shipped config's name)")
+    fly.add_argument("--connect", metavar="ENDPOINT", help="fly a bounded excitation at hover first (about 35 s; like fly --connect), then fit its log")
+    fly.add_argument("--config", metavar="YAML", help="config file or shipped name: with --connect its flight settings (output mode, rate); base of --write-config")
     fly.add_argument("--takeoff", type=float, metavar="H", help="with --connect: arm and take off to H m first (default: the vehicle is airborne)")
     fly.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: flight.output_mode)")
-    fly.add_argument("--duration", type=float, default=16.0, metavar="S", help="excitation length, s (default 16)")
-    fly.add_argument("--box", type=float, default=1.0, metavar="M", help="abort to hold beyond M metres from the start on any axis (default 1)")
+    fly.add_argument("--duration", type=float, default=30.0, metavar="S", help="excitation length, s (default 30)")
+    fly.add_argument("--box", type=float, default=1.5, metavar="M", help="abort to hold beyond M metres from the start on any axis (default 1.5)")
     fly.add_argument("--max-speed", type=float, default=2.0, metavar="M_S", help="abort above this speed (default 2 m/s)")
     fly.add_argument("--max-tilt", type=float, default=35.0, metavar="DEG", help="abort above this tilt (default 35 deg)")
-    fly.add_argument("--amplitude", type=float, default=0.6, metavar="M_S2", help="horizontal doublet amplitude (default 0.6 m/s^2; vertical 0.8 of it)")
+    fly.add_argument("--amplitude", type=float, default=1.0, metavar="M_S2", help="horizontal doublet amplitude (default 1 m/s^2; vertical 0.8 of it)")
     fly.add_argument("--seed", type=int, default=0, help="seed of the excitation's random doublets")
     fly.add_argument("--autopilot", choices=("auto", "px4", "ardupilot"), default="auto", help="default: from HEARTBEAT")
     fly.add_argument("--target-system", type=int, metavar="ID", help="vehicle system id (default: first autopilot heard)")
@@ -86,8 +89,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"pf-offboard identify: excitation aborted ({outcome.aborted}); fitting what was flown", file=sys.stderr)
         logs = [outcome.tlog]
     elif not logs:
-        raise InputError("LOG", "give at least one .tlog to fit, or --connect to fly an excitation")
-    data = [load_log(p, hover_thrust=args.hover_thrust, velocity_correction_s=correction) for p in logs]
+        raise InputError("LOG", "give at least one .tlog or .ulg to fit, or --connect to fly an excitation")
+    if args.truth and any(p.suffix.lower() != ".ulg" for p in logs):
+        raise InputError("--truth", "only a PX4 ULog (.ulg) from the SIH simulator carries ground truth")
+    data = [load_log(p, hover_thrust=args.hover_thrust, velocity_correction_s=correction, truth=args.truth) for p in logs]
     name = str(logs[0]) if len(logs) == 1 else f"{len(logs)} logs"
     ident = identify([s for d in data for s in d.segments], source=name)
     if args.json:

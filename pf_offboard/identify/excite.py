@@ -270,6 +270,19 @@ class ExcitationFollower:
 
 
 # ---------------------------------------------------------------------------------- identify --connect
+def excitation_status(line: str, follower: ExcitationFollower, record: Any, rate_hz: float) -> str:
+    """The status line of an excitation: it has no path (the path-following line would show
+    η1 nan), so its time and its offset from the start, after the line's mode and arming."""
+    if record is None or follower.start_position_enu_m is None or follower.start_time_s is None:
+        return line
+    head = line.split("  η1", 1)[0].split("  rate", 1)[0]
+    off = np.asarray(record.position_enu_m, dtype=float) - follower.start_position_enu_m
+    t = follower.excitation_time_s()
+    when = f"excitation {t:5.1f} s of {follower.spec.duration_s:.0f}" if t >= 0.0 else f"settling, excitation in {-t:.1f} s"
+    return (f"{head}  {when}  "
+            f"offset from the start E {off[0]:+5.2f} N {off[1]:+5.2f} U {off[2]:+5.2f} m  rate {rate_hz:5.0f} Hz")  # fmt: skip
+
+
 @dataclass(frozen=True)
 class ExciteOutcome:
     """How the excitation flight ended."""
@@ -368,6 +381,10 @@ async def _excite(request: ExciteRequest, endpoint: Any, config: Any, settings: 
 
     def started(flight: Any) -> None:
         loop.add_signal_handler(signal.SIGINT, flight.request_stop)  # Ctrl-C: hand back, as fly does
+        # no path: the status line shows the excitation's time and offset, never η1 nan
+        flight.status_hook = lambda line, f: excitation_status(
+            line, followers[-1], None if f.last_step is None else f.last_step.record, f.loop_rate_hz
+        )
 
     def ended(flight: Any) -> None:
         loop.remove_signal_handler(signal.SIGINT)
@@ -390,7 +407,10 @@ async def _excite(request: ExciteRequest, endpoint: Any, config: Any, settings: 
             if exc.result is None:
                 raise
             result = exc.result
-    print(f"pf-offboard identify: excitation flight: {result.reason} (exit {result.exit_code})", file=stream)
+    # the flight's own outcome; identify's exit code comes after the fit (a flight that ended well
+    # can still be too short or too poor to fit)
+    ended = "flown; fitting its log next" if result.exit_code == 0 else f"ended (exit {result.exit_code})"
+    print(f"pf-offboard identify: excitation flight {ended}: {result.reason}", file=stream)
     tlog = result.log_dir / "identify.tlog" if result.log_dir is not None else None
     return ExciteOutcome(result.exit_code, result.reason, result.log_dir, tlog, followers[-1].abort_reason if followers else "")
 

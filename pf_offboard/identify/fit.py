@@ -61,7 +61,9 @@ VERTICAL = GROUPS["z"]
 # section flew 14.0 cm/s speed error RMS at 8.2 cm; amplitude 1 m/s^2 over 30 s fitted 0.90 / 0.88
 # and flew 7.3 cm/s at 4.3 cm; path-following logs fit 0.93-0.96 (docs/identify.md).
 FLYABLE_R2 = 0.85
-STRONGER_EXCITATION = "fly a stronger, longer excitation (e.g. --amplitude 1 --duration 30 --box 1.5) or fit more logs"
+STRONGER_EXCITATION = ("fit a path-following flight's log instead (pf-offboard identify LOG_DIR/flight.tlog, or a PX4 .ulg; "
+                       "add --velocity-correction 0.3 on PX4 SIH), or fly a stronger, longer excitation "
+                       "(e.g. --amplitude 1.5 --box 2)")
 # Integral-equation window (s). Short windows time the response sharply and difference out an
 # estimate error that drifts slower than they last: on 20 s path logs of the noisy `px4-sih` mock
 # (velocity made position-consistent, eight seeds) 0.2 s gave the xy rise within 5 % and gain and

@@ -150,11 +150,15 @@ def _heartbeat_active(msg: Any) -> bool:
 
 
 def _read_raw(path: Path) -> _Raw:
+    from pf_offboard.logs.flightlog import FlightLogPaths
+    from pf_offboard.logs.foreign import iter_tlog_lenient
     from pf_offboard.logs.tlog import iter_tlog
 
     raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], {}, None)
     last_lpn_t = -math.inf
-    for entry in iter_tlog(path):
+    # pf-offboard's own logs (its step log beside them) strictly; anyone else's (MAVProxy) leniently
+    ours = FlightLogPaths.beside(path).steps_csv.exists() or path.name.endswith(".gz")
+    for entry in iter_tlog(path) if ours else iter_tlog_lenient(path):
         msg = entry.message
         kind = msg.get_type()
         if entry.direction == "in":
@@ -204,6 +208,47 @@ def _read_raw(path: Path) -> _Raw:
             raw.sp_q_ned_frd.append(tuple(float(c) for c in msg.q))  # type: ignore[arg-type]
             raw.sp_rates_frd.append((msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate))
             raw.sp_thrust.append(float(msg.thrust))
+    return raw
+
+
+def _read_raw_ulog(path: Path, truth: bool = False) -> _Raw:
+    """A PX4 ULog as :class:`_Raw`: PX4's own record of the offboard setpoints it received, its
+    estimate (``truth``: SIH's ground truth instead) and its mode, all on its boot clock (the
+    clock map is then the identity)."""
+    from pf_offboard.logs.ulog import read_ulog
+
+    flight = read_ulog(path)
+    raw = _Raw([], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], [], dict(flight.parameters), _MAV_AUTOPILOT_PX4)
+    track = flight.truth if truth and flight.truth is not None else flight.estimate
+    if truth and flight.truth is None:
+        raise InputError(str(path), "no ground truth in this ULog (only PX4's SIH simulator logs it)")
+    raw.lpn_t = track.time_s.tolist()
+    raw.lpn_unix = track.time_s.tolist()
+    raw.lpn_p_ned = [tuple(p) for p in track.position_ned_m.tolist()]
+    raw.lpn_v_ned = [tuple(v) for v in track.velocity_ned_m_s.tolist()]
+    ok = np.all(np.isfinite(flight.attitude_q_ned_frd), axis=1)
+    raw.att_t = flight.attitude_time_s[ok].tolist()
+    raw.att_q_ned_frd = [tuple(q) for q in flight.attitude_q_ned_frd[ok].tolist()]
+    if len(flight.rates_time_s):
+        rates = np.column_stack([np.interp(flight.attitude_time_s[ok], flight.rates_time_s, flight.rates_frd_rad_s[:, k]) for k in range(3)])
+    else:
+        rates = np.zeros((int(np.sum(ok)), 3))
+    raw.att_rates_frd = [tuple(r) for r in rates.tolist()]
+    raw.hb_unix = flight.status_time_s.tolist()
+    raw.hb_active = flight.offboard_armed.tolist()
+    sp = flight.setpoints
+    if sp is not None:
+        n = len(sp.time_s)
+        raw.sp_unix = sp.time_s.tolist()
+        raw.sp_boot = sp.time_s.tolist()
+        raw.sp_lpn_boot = sp.time_s.tolist()  # PX4's own stamps: exact
+        raw.sp_kind = [sp.kind] * n
+        nan3 = [(math.nan, math.nan, math.nan)] * n
+        raw.sp_accel_ned = [tuple(a) for a in sp.accel_ned_m_s2.tolist()] if sp.accel_ned_m_s2 is not None else nan3
+        raw.sp_q_ned_frd = [tuple(q) for q in sp.q_ned_frd.tolist()] if sp.q_ned_frd is not None else [(1.0, 0.0, 0.0, 0.0)] * n
+        raw.sp_rates_frd = [tuple(r) for r in sp.rates_frd_rad_s.tolist()] if sp.rates_frd_rad_s is not None else [(0.0, 0.0, 0.0)] * n
+        raw.sp_thrust = sp.thrust.tolist() if sp.thrust is not None else [math.nan] * n
+    raw.param_types = {k: 9 for k in raw.params}  # values as logged (floats), not MAVLink's bytewise encoding
     return raw
 
 
@@ -284,8 +329,10 @@ def load_log(
     hover_thrust: float | None = None,
     grid_dt_s: float | None = None,
     velocity_correction_s: float | None = None,
+    truth: bool = False,
 ) -> LogData:
-    """Read one ``.tlog`` / ``.tlog.gz`` into active segments (see the module docstring).
+    """Read one ``.tlog`` / ``.tlog.gz`` or PX4 ``.ulg`` into active segments (see the module docstring;
+    ``truth``: a ULog's simulator ground truth instead of the estimate).
 
     ``hover_thrust``: the normalised hover thrust the app used for attitude / rates setpoints
     (default: the log's sibling config ``flight.hover_thrust``, else the autopilot's parameter
@@ -299,12 +346,16 @@ def load_log(
         raise InputError(name, "no such file")
     if p.is_dir():
         raise InputError(name, "is a directory, not a .tlog")
-    raw = _read_raw(p)
+    ulog = p.suffix.lower() == ".ulg"
+    raw = _read_raw_ulog(p, truth) if ulog else _read_raw(p)
     if len(raw.lpn_t) < 20:
         raise InputError(name, f"only {len(raw.lpn_t)} LOCAL_POSITION_NED samples: no measured velocity to fit")
     kinds = [k for k in raw.sp_kind if k in SETPOINT_KINDS]
     if not kinds:
-        raise InputError(name, "no acceleration or attitude setpoints from the app (component 191) in the log")
+        if ulog:
+            raise InputError(name, "no offboard flight in this ULog (never armed in OFFBOARD with acceleration, attitude or rate setpoints)")
+        raise InputError(name, "no acceleration or attitude setpoints from the app (component 191) in the log: "
+                         "identify fits flights flown by pf-offboard (its .tlog) or a PX4 ULog (.ulg) of an offboard flight")  # fmt: skip
     # the kind that flew: an app may stream other setpoints while the autopilot is not yet armed in
     # its mode, more of them than it flies (an ArduCopter `fly` log: 40 s of level attitude targets
     # before arming in GUIDED, 21 s of flown body rates)

@@ -78,6 +78,36 @@ def load_run(path: str | Path) -> Run:
     return Run.from_records(name, read_steplog(csv_path))
 
 
+def _is_foreign(path: Path) -> bool:
+    """A PX4 ULog, or a tlog without pf-offboard's step CSV beside it (a ground station's)."""
+    if path.suffix.lower() == ".ulg":
+        return True
+    return path.name.endswith((".tlog", ".tlog.gz")) and not FlightLogPaths.beside(path).steps_csv.exists()
+
+
+def load_runs(path: str | Path, config_path: Path | None) -> list[Run]:
+    """The runs of one log: ours (its step CSV), or a ULog's / ground station's tlog's track(s)
+    with the path coordinates computed against ``config_path``'s path."""
+    p = Path(path)
+    if not _is_foreign(p):
+        return [load_run(p)]
+    from pf_offboard.logs.foreign import read_foreign_tlog, read_ulog_tracks, step_records
+
+    kind = "a PX4 ULog" if p.suffix.lower() == ".ulg" else "a ground station's tlog (no pf-offboard step log beside it)"
+    if config_path is None:
+        raise InputError(str(p), f"is {kind}: pass --config (the config that was flown) to plot it against its path")
+    from pf_offboard.config import load_config
+    from pf_offboard.control import PathFollower
+
+    config = load_config(config_path).require_local("for a path from a planning tool, give path.origin")
+    tracks = read_ulog_tracks(p) if p.suffix.lower() == ".ulg" else [read_foreign_tlog(p)]
+    runs = []
+    for track in tracks:
+        records = step_records(track, PathFollower.from_config(config))
+        runs.append(Run.from_records(track.name, records))
+    return runs
+
+
 def _start_label(run: Run) -> str:
     r = run.records[run.first_active]
     x, y, z = r.position_enu_m
@@ -85,6 +115,16 @@ def _start_label(run: Run) -> str:
     if speed > _THROW_SPEED_M_S:
         return f"{run.name}: |v| = {speed:.1f} m/s at activation"
     return f"{run.name}: start ({x:.1f}, {y:.1f}, {z:.1f}) m"
+
+
+def _waypoints(config_path: Path | None) -> NDArray[np.float64] | None:
+    """The config's way-points (ENU m), to mark on the figures; None without a local path."""
+    if config_path is None:
+        return None
+    from pf_offboard.config import load_config
+
+    config = load_config(config_path)
+    return np.asarray(config.path.waypoints_enu_m, dtype=float) if config.path.waypoints_enu_m else None
 
 
 def _reference_path(config_path: Path | None) -> NDArray[np.float64] | None:
@@ -126,13 +166,16 @@ def _equal_aspect(ax: object, points: NDArray[np.float64]) -> None:
     ax.set_box_aspect(np.maximum(hi - lo, 0.2 * float(np.max(hi - lo)) + 1e-6))  # type: ignore[attr-defined]
 
 
-def plot_path3d(runs: Sequence[Run], reference: NDArray[np.float64] | None, out: Path, title: str) -> Path:
+def plot_path3d(runs: Sequence[Run], reference: NDArray[np.float64] | None, out: Path, title: str,
+                waypoints: NDArray[np.float64] | None = None) -> Path:  # fmt: skip
     import matplotlib.pyplot as plt
 
     fig = plt.figure(figsize=(6.4, 5.2))
     ax = fig.add_subplot(projection="3d")
     if reference is not None:
-        ax.plot(reference[:, 0], reference[:, 1], reference[:, 2], color="k", ls="--", lw=1.4, label="reference path")
+        ax.plot(reference[:, 0], reference[:, 1], reference[:, 2], color="k", ls="--", lw=1.4, label="path to follow")
+    if waypoints is not None:
+        ax.scatter(waypoints[:, 0], waypoints[:, 1], waypoints[:, 2], color="k", marker="s", s=14, depthshade=False, label="way-points")
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, run in enumerate(runs):
         c = colors[k % len(colors)]
@@ -143,9 +186,9 @@ def plot_path3d(runs: Sequence[Run], reference: NDArray[np.float64] | None, out:
             ax.scatter(*p[run.first_active], color=c, marker="x", s=36, depthshade=False)
     pts = [run.col("position_enu_m") for run in runs] + ([reference] if reference is not None else [])
     _equal_aspect(ax, np.vstack(pts))
-    ax.set_xlabel("x east [m]")
-    ax.set_ylabel("y north [m]")
-    ax.set_zlabel("z up [m]")
+    ax.set_xlabel("east, x (m)")
+    ax.set_ylabel("north, y (m)")
+    ax.set_zlabel("up, z (m)")
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
@@ -208,7 +251,8 @@ def _origin_note(log_dir: Path) -> str:
         return ""
 
 
-def plot_map(runs: Sequence[Run], reference: NDArray[np.float64] | None, fence: Fence | None, out: Path, note: str = "") -> Path:
+def plot_map(runs: Sequence[Run], reference: NDArray[np.float64] | None, fence: Fence | None, out: Path, note: str = "",
+             waypoints: NDArray[np.float64] | None = None) -> Path:  # fmt: skip
     """Top view in the map frame (x east, y north, metres; equal scale): the reference path,
     every run's track with its start (o) and activation (x), the local origin (+) and the fence."""
     import matplotlib.pyplot as plt
@@ -222,7 +266,11 @@ def plot_map(runs: Sequence[Run], reference: NDArray[np.float64] | None, fence: 
     elif fence is not None and fence.center_enu_m is not None and fence.radius_m is not None:
         ax.add_patch(Circle(fence.center_enu_m, fence.radius_m, fill=False, ec="C3", lw=1.5, label=f"geofence r = {fence.radius_m:g} m"))
     if reference is not None:
-        ax.plot(reference[:, 0], reference[:, 1], color="k", ls="--", lw=1.3, label="reference path")
+        ax.plot(reference[:, 0], reference[:, 1], color="k", ls="--", lw=1.3, label="path to follow")
+    if waypoints is not None:
+        ax.plot(waypoints[:, 0], waypoints[:, 1], "s", color="k", ms=4, label="way-points")
+        for i, w in enumerate(waypoints):
+            ax.annotate(str(i + 1), (w[0], w[1]), textcoords="offset points", xytext=(4, 4), fontsize=7)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, run in enumerate(runs):
         c = colors[k % len(colors)]
@@ -233,9 +281,9 @@ def plot_map(runs: Sequence[Run], reference: NDArray[np.float64] | None, fence: 
             ax.plot(p[run.first_active, 0], p[run.first_active, 1], "x", color=c, ms=7)
     ax.plot(0.0, 0.0, "+", color="0.3", ms=10, mew=1.5, label="origin (0, 0)")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x east [m]")
-    ax.set_ylabel("y north [m]")
-    ax.set_title("Top view, local ENU frame" + note, fontsize=9)
+    ax.set_xlabel("east, x (m)")
+    ax.set_ylabel("north, y (m)")
+    ax.set_title("Top view (o start, x path following begins)" + note, fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
@@ -269,18 +317,18 @@ def plot_tangential(run: Run, out: Path) -> Path:
 
     fig, (a1, a2) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 4.6))
     a1.plot(run.t_s, _break_wraps(run.col("eta1_m")), lw=1.3, label=r"$\eta_1$")
-    a1.set_ylabel(r"$\eta_1$ [m]")
+    a1.set_ylabel("along the path, " + r"$\eta_1$" + " (m)")
     a2.plot(run.t_s, run.col("eta2_m_s"), lw=1.3, label=r"$\eta_2$")
     ref = run.col("speed_ref_m_s")
     a2.plot(run.t_s, ref, "--", color="C3", lw=1.2, label=r"$\eta_2^{ref}$ = " + f"{ref[run.first_active]:.2f} m/s")
-    a2.set_ylabel(r"$\eta_2$ [m/s]")
-    a2.set_xlabel("time [s]")
+    a2.set_ylabel("speed along the path,\n" + r"$\eta_2$" + " (m/s)")
+    a2.set_xlabel("time (s)")
     _focus_on_active(a2, run, run.col("eta2_m_s"), ref)
     for ax in (a1, a2):
         _mark_activation(ax, run, label=True)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="best")
-    a1.set_title(f"Tangential states, {run.name}", fontsize=10)
+    a1.set_title(f"Progress and speed along the path, {run.name}", fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=_DPI)
     plt.close(fig)
@@ -292,52 +340,79 @@ def plot_transversal(run: Run, out: Path) -> Path:
 
     fig, axes = plt.subplots(2, 2, sharex=True, figsize=(7.6, 4.8))
     panels = (
-        ("xi1_m", r"$\xi_1$ [m]"),
-        ("phi1_m", r"$\varphi_1$ [m]"),
-        ("xi2_m_s", r"$\xi_2$ [m/s]"),
-        ("phi2_m_s", r"$\varphi_2$ [m/s]"),
+        ("xi1_m", "off the path, normal direction,\n" + r"$\xi_1$" + " (cm)", r"$\xi_1$", 100.0),
+        ("phi1_m", "off the path, binormal direction,\n" + r"$\varphi_1$" + " (cm)", r"$\varphi_1$", 100.0),
+        ("xi2_m_s", "speed off the path, normal,\n" + r"$\xi_2$" + " (cm/s)", r"$\xi_2$", 100.0),
+        ("phi2_m_s", "speed off the path, binormal,\n" + r"$\varphi_2$" + " (cm/s)", r"$\varphi_2$", 100.0),
     )
-    for ax, (name, label) in zip(axes.flat, panels):
-        ax.plot(run.t_s, run.col(name), lw=1.2, label=label.split(" ")[0])
+    for ax, (name, label, symbol, scale) in zip(axes.flat, panels):
+        ax.plot(run.t_s, scale * run.col(name), lw=1.2, label=symbol)
         ax.axhline(0.0, color="k", lw=0.6)
-        _focus_on_active(ax, run, run.col(name))
+        _focus_on_active(ax, run, scale * run.col(name))
         _mark_activation(ax, run, label=True)
-        ax.set_ylabel(label)
+        ax.set_ylabel(label, fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="best")
     for ax in axes[1]:
-        ax.set_xlabel("time [s]")
-    fig.suptitle(f"Transversal states, {run.name}", fontsize=10)
+        ax.set_xlabel("time (s)")
+    fig.suptitle(f"Distance and speed off the path (transversal states), {run.name}", fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=_DPI)
     plt.close(fig)
     return out
 
 
+def tracking_line(run: Run, settle_s: float = 8.0) -> str:
+    """How well a run followed its path: cross-track and speed-error RMS of the steps from
+    activation + ``settle_s`` to the end of that active stretch (for logs that carry no summary)."""
+    active = np.array([r.active for r in run.records])
+    if not active.any():
+        return f"{run.name}: never armed in OFFBOARD / GUIDED"
+    start = int(np.argmax(active))
+    stop = start + int(np.argmin(active[start:])) if not active[start:].all() else len(active)
+    t = run.t_s
+    window = (t >= t[start] + settle_s) & (np.arange(len(t)) < stop)
+    if window.sum() < 2:
+        return f"{run.name}: {t[stop - 1] - t[start]:.1f} s following, shorter than activation + {settle_s:g} s"
+    e = run.col("cross_track_m")[window]
+    dv = (run.col("eta2_m_s") - run.col("speed_ref_m_s"))[window]
+    return (f"{run.name}: from activation + {settle_s:g} s ({t[window][-1] - t[window][0]:.1f} s): cross-track RMS "
+            f"{100 * np.sqrt(np.mean(e**2)):.1f} cm, max {100 * np.max(e):.1f} cm; speed error RMS "
+            f"{100 * np.sqrt(np.mean(dv**2)):.1f} cm/s (speed along the path from the position's derivative)")  # fmt: skip
+
+
 def make_figures(
-    logs: Sequence[str | Path], out_dir: str | Path, config_path: str | Path | None = None, title: str | None = None
+    logs: Sequence[str | Path], out_dir: str | Path, config_path: str | Path | None = None, title: str | None = None,
+    report: list[str] | None = None,
 ) -> list[Path]:
-    """Write the figures for ``logs`` into ``out_dir``; returns the PNG paths."""
+    """Write the figures for ``logs`` into ``out_dir``; returns the PNG paths. ``report``: gets one
+    :func:`tracking_line` per run of a log without its own summary (ULogs, other senders' tlogs)."""
     import matplotlib
 
     matplotlib.use("Agg")
     if not logs:
         raise InputError("LOG", "give at least one log")
-    runs = [load_run(p) for p in logs]
-    names = [r.name for r in runs]
-    if len(set(names)) != len(names):  # two runs called "flight": number them
-        runs = [Run(f"{r.name}{i + 1}", r.records, r.t_s, r.activation_s) for i, r in enumerate(runs)]
     cfg = Path(config_path) if config_path is not None else FlightLogPaths.beside(logs[0]).config_yaml
     if config_path is not None and not cfg.exists():
         raise InputError("--config", f"no such file: {cfg}")
+    runs = []
+    for p in logs:
+        loaded = load_runs(p, cfg if cfg.exists() else None)
+        if report is not None and _is_foreign(Path(p)):
+            report.extend(tracking_line(r) for r in loaded)
+        runs += loaded
+    names = [r.name for r in runs]
+    if len(set(names)) != len(names):  # two runs called "flight": number them
+        runs = [Run(f"{r.name}{i + 1}", r.records, r.t_s, r.activation_s) for i, r in enumerate(runs)]
     reference = _reference_path(cfg if cfg.exists() else None)
+    waypoints = _waypoints(cfg if cfg.exists() else None)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ref_speed = runs[0].records[runs[0].first_active].speed_ref_m_s
     default_title = "Path following, " + r"$\eta_2^{ref}$" + (f" = {ref_speed:.2f} m/s" if math.isfinite(ref_speed) else "")
-    pngs = [plot_path3d(runs, reference, out / "path3d.png", title or default_title)]
+    pngs = [plot_path3d(runs, reference, out / "path3d.png", title or default_title, waypoints)]
     fence = fence_from_config(cfg if cfg.exists() else None)
-    pngs.append(plot_map(runs, reference, fence, out / "map.png", _origin_note(Path(logs[0]).parent)))
+    pngs.append(plot_map(runs, reference, fence, out / "map.png", _origin_note(Path(logs[0]).parent), waypoints))
     for run in runs:
         pngs.append(plot_tangential(run, out / f"{run.name}_tangential.png"))
         pngs.append(plot_transversal(run, out / f"{run.name}_transversal.png"))
@@ -345,23 +420,28 @@ def make_figures(
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("logs", nargs="+", metavar="LOG", help="step-log CSVs or .tlog files (with their sibling .csv)")
+    parser.add_argument("logs", nargs="+", metavar="LOG",
+                        help="pf-offboard step-log CSVs or .tlog files (with their sibling .csv); a PX4 ULog (.ulg) or a ground "
+                             "station's .tlog with --config")  # fmt: skip
     parser.add_argument("--out", required=True, help="directory for the PNGs")
-    parser.add_argument("--config", help="config YAML (or a shipped config's name) for the reference path (default: the .yaml beside the first log)")
+    parser.add_argument("--config", help="config file or shipped name for the path (default: the .yaml beside the first log)")
     parser.add_argument("--title", help="title of the 3-D path figure")
 
 
 def run(args: argparse.Namespace) -> int:
     for p in args.logs:
         if not Path(p).exists():
-            raise InputError("LOG", f"no such file: {p}")
+            raise InputError(str(p), "no such file")
         if Path(p).is_dir():
             raise InputError("LOG", f"{p} is a directory; give its .csv or .tlog (e.g. {Path(p) / 'flight.csv'})")
-    make_dir(args.out, "--out")
     if args.config:
         from pf_offboard.shipped import resolve_config
 
         args.config = str(resolve_config(args.config))  # a file, or a shipped config's name
-    for png in make_figures(args.logs, args.out, args.config, args.title):
+    make_dir(args.out, "--out")
+    report: list[str] = []
+    for png in make_figures(args.logs, args.out, args.config, args.title, report):
         print(png)
+    for line in report:
+        print(line)
     return 0

@@ -378,6 +378,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--hover-thrust", f"must be in [0.05, 0.95] (normalised), got {args.hover_thrust}")
     if Path(args.log).is_dir():
         raise InputError("LOG", f"{args.log} is a directory; give its .tlog (e.g. {Path(args.log) / 'flight.tlog'})")
+    if not Path(args.log).exists():
+        raise InputError(str(args.log), "no such file")
+    if Path(args.log).suffix.lower() == ".ulg":
+        raise InputError(str(args.log), "is a PX4 ULog: replay re-runs the controller on the telemetry pf-offboard received, "
+                         "which only its own .tlog holds; plot and identify read ULogs")  # fmt: skip
     if args.config:
         from pf_offboard.shipped import resolve_config
 

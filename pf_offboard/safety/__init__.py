@@ -15,10 +15,11 @@ from pf_offboard.safety.envelope import (
     VehicleSample,
     check_path,
     fence_for_path,
+    takeoff_height_in_fence,
     tilt_rad,
 )
 
 __all__ = [
     "ACTIONS", "SHAPES", "Breach", "EnvelopeMonitor", "Fence", "SafetyConfig", "Verdict", "VehicleSample",
-    "check_path", "fence_for_path", "tilt_rad",
+    "check_path", "fence_for_path", "takeoff_height_in_fence", "tilt_rad",
 ]

@@ -139,6 +139,30 @@ def check_path(fence: Fence, path_points_enu_m: Iterable[ArrayLike]) -> str:
     return ""
 
 
+# How far inside the fence's floor / ceiling a take-off ends: the autopilot's take-off counts as
+# done some 0.2 m short of its target (PX4), and following must not start in a breach.
+TAKEOFF_CLEARANCE_M = 0.5
+
+
+def takeoff_height_in_fence(fence: Fence, height_m: float, clearance_m: float = TAKEOFF_CLEARANCE_M) -> tuple[float, str]:
+    """The take-off height (ENU z, m) to fly so that following starts inside the fence, and a
+    note saying why it differs from ``height_m`` ("" when it does not).
+
+    A height below the fence's floor (or above its ceiling) would arm, climb and end the flight
+    in an envelope breach at activation; the vehicle climbs to ``clearance_m`` above the floor
+    (below the ceiling) instead, or to the middle of a band narrower than twice the clearance."""
+    lo, hi = fence.floor_m + clearance_m, fence.ceiling_m - clearance_m
+    if lo > hi:
+        lo = hi = 0.5 * (fence.floor_m + fence.ceiling_m)
+    if height_m < lo:
+        return lo, (f"take-off height {height_m:g} m is below the path's fence floor {fence.floor_m:.2f} m: "
+                    f"taking off to {lo:.2f} m instead")  # fmt: skip
+    if height_m > hi:
+        return hi, (f"take-off height {height_m:g} m is above the path's fence ceiling {fence.ceiling_m:.2f} m: "
+                    f"taking off to {hi:.2f} m instead")  # fmt: skip
+    return height_m, ""
+
+
 def tilt_rad(q_enu_flu: ArrayLike) -> float:
     """Angle between the body z axis (thrust) and world up, for a unit quaternion (w, x, y, z)."""
     w, x, y, z = (float(v) for v in np.asarray(q_enu_flu, dtype=float))

@@ -60,3 +60,71 @@ def test_position_jump_out_of_the_fence_ends_following_in_hold(tmp_path) -> None
     after = [m for m in out if m.get_type() in SETPOINT_TYPES and m.time_boot_ms >= round(outcome.breach_time_s * 1000)]
     assert after and all(is_safe_setpoint(m) for m in after)
     assert [m.param2 for m in out if is_mode_request(m)][-1] == 4  # AUTO (LOITER)
+
+
+def test_takeoff_height_is_kept_inside_the_fence() -> None:
+    from pf_offboard.safety import Fence, takeoff_height_in_fence
+
+    fence = Fence("box", 3.0, 8.0, min_xy_m=(-5.0, -5.0), max_xy_m=(5.0, 5.0))
+    assert takeoff_height_in_fence(fence, 5.0) == (5.0, "")
+    low, note = takeoff_height_in_fence(fence, 2.0)
+    assert low == 3.5 and "below the path's fence floor 3.00 m" in note
+    high, note = takeoff_height_in_fence(fence, 20.0)
+    assert high == 7.5 and "above the path's fence ceiling" in note
+    narrow = Fence("box", 3.0, 3.6, min_xy_m=(-5.0, -5.0), max_xy_m=(5.0, 5.0))
+    assert takeoff_height_in_fence(narrow, 2.0)[0] == pytest.approx(3.3)
+
+
+def test_a_takeoff_below_the_fence_floor_climbs_to_the_floor_instead_of_breaching(tmp_path) -> None:
+    """`--takeoff 2` with the path's fence floor at 3 m used to arm, climb to 2 m and end in
+    "outside the fence: altitude below the floor" (exit 5). Now the take-off goes to the floor +
+    0.5 m, says so before arming, and the flight follows the path (exit 0)."""
+    import io
+
+    import yaml
+    from sitl_mock.config import MockConfig, SpawnSpec
+
+    from app.flights import fly_args
+    from pf_offboard.app.fly import fly
+
+    config = write_config(tmp_path, safety={"min_altitude_m": 3.0})
+    data = yaml.safe_load(config.read_text())
+    data["path"]["waypoints"] = [[x, y, z + 2.0] for x, y, z in data["path"]["waypoints"]]  # lowest point 3.8 m
+    config.write_text(yaml.safe_dump(data))
+    cfg = MockConfig(vehicle="fast", profile="px4", spawn=SpawnSpec.parse("ground"), udp_local_port=0, udp_remote=None, speed=4.0)
+    status = io.StringIO()
+    with run_in_thread(cfg) as mock:
+        args = fly_args("--connect", f"udpout:127.0.0.1:{mock.ports.udp}", "--config", str(config), "--log-dir",
+                        str(tmp_path / "log"), "--heartbeat-timeout", "5", "--takeoff", "2", "--duration", "2")  # fmt: skip
+        outcome = fly(args, status_stream=status)
+    text = status.getvalue()
+    assert "take-off height 2 m is below the path's fence floor 3.00 m: taking off to 3.50 m" in text
+    assert text.index("taking off to 3.50 m") < text.index("arm")  # said before arming
+    assert outcome.exit_code == 0, (outcome.reason, text[-1500:])
+    first = next(r for r in outcome.records if r.active)
+    assert first.position_enu_m[2] >= 3.0  # following began inside the fence
+
+
+def test_a_plans_take_off_altitude_is_takeoffs_default(tmp_path) -> None:
+    """`--takeoff` without a height: the plan's take-off item's altitude (above home), else flight:."""
+    import argparse
+    import json
+    from pathlib import Path
+
+    from pf_offboard.app.fly import FROM_CONFIG, _heights_from_config
+    from pf_offboard.config import load_config
+
+    data_dir = Path(__file__).resolve().parents[1] / "data" / "geo"
+    plan = json.loads((data_dir / "mission.plan").read_text())
+    takeoff = next(item for item in plan["mission"]["items"] if item.get("command") == 22)
+    takeoff["params"][6] = 3.5
+    (tmp_path / "field.plan").write_text(json.dumps(plan))
+    (tmp_path / "field.yaml").write_text("path: {file: field.plan, altitude_reference: relative_home, closed: true}\n"
+                                         "flight: {takeoff_altitude_m: 2.5}\n")  # fmt: skip
+    args = argparse.Namespace(takeoff=FROM_CONFIG, throw=None)
+    _heights_from_config(args, load_config(tmp_path / "field.yaml"))
+    assert args.takeoff == 3.5
+    (tmp_path / "local.yaml").write_text("path: {waypoints: [[0, 0, 2], [4, 0, 2]]}\nflight: {takeoff_altitude_m: 2.5}\n")
+    args = argparse.Namespace(takeoff=FROM_CONFIG, throw=None)
+    _heights_from_config(args, load_config(tmp_path / "local.yaml"))
+    assert args.takeoff == 2.5

@@ -156,7 +156,7 @@ def test_cli_replay_bad_flags(flags: list[str], message: str, capsys: pytest.Cap
 def test_cli_replay_missing_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "x.yaml").write_bytes(golden("paper_hover_px4")[2].read_bytes())
     assert main(["replay", str(tmp_path / "x.tlog")]) == 2
-    assert "x.tlog: cannot read" in capsys.readouterr().err
+    assert "x.tlog: no such file" in capsys.readouterr().err
 
 
 def test_cli_replay_of_a_directory_names_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -63,7 +63,7 @@ def test_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "no such file" in capsys.readouterr().err
     (tmp_path / "x.tlog").write_bytes(b"\0" * 20)
     assert main(["plot", str(tmp_path / "x.tlog"), "--out", str(tmp_path)]) == 2
-    assert "no step log x.csv" in capsys.readouterr().err
+    assert "x.tlog: is a ground station's tlog" in capsys.readouterr().err  # no step log beside it: needs --config
     circle_flight(tmp_path / "a.csv", (0.0, -1.5), thrown=False)
     assert main(["plot", str(tmp_path / "a.csv"), "--out", str(tmp_path / "x.tlog" / "figs")]) == 2
     err = capsys.readouterr().err
