@@ -53,6 +53,7 @@ _EXPORTS: dict[str, str] = {
     "AutopilotFailsafe": "pf_offboard.errors",
     "FlightInterrupted": "pf_offboard.errors",
     "InputError": "pf_offboard.errors",
+    "LinkError": "pf_offboard.errors",
 }
 
 __all__ = sorted(_EXPORTS)
@@ -71,6 +72,7 @@ if TYPE_CHECKING:
         FlightError,
         FlightInterrupted,
         InputError,
+        LinkError,
         LinkLost,
         OperatorTakeover,
     )

@@ -161,13 +161,34 @@ def test_link_lost(tmp_path) -> None:
 
 
 def test_no_autopilot_is_link_lost_on_connect() -> None:
+    printed = io.StringIO()
+
     async def fly() -> None:
-        async with pf_offboard.connect("udpin://127.0.0.1:14599", heartbeat_timeout_s=0.3, status_stream=io.StringIO()):
+        async with pf_offboard.connect("udpin://127.0.0.1:14599", heartbeat_timeout_s=0.3, status_stream=printed):
             pass
 
     with pytest.raises(pf_offboard.LinkLost) as info:
         asyncio.run(fly())
     assert info.value.result is None and "no HEARTBEAT" in str(info.value)
+    assert printed.getvalue().startswith("waiting for a HEARTBEAT on udpin:127.0.0.1:14599 (up to 0.3 s)")
+
+
+def test_the_heartbeat_wait_says_how_long_it_has_waited() -> None:
+    from pf_offboard.app.link import Link, parse_endpoint
+
+    lines: list[str] = []
+
+    async def wait() -> None:
+        link = Link.open(parse_endpoint("udpin://127.0.0.1:14598"))
+        try:
+            await link.wait_heartbeat(0.45, announce=lines.append, progress_every_s=0.1)
+        finally:
+            link.close()
+
+    with pytest.raises(pf_offboard.LinkError):
+        asyncio.run(wait())
+    assert lines[0] == "waiting for a HEARTBEAT on udpin:127.0.0.1:14598 (up to 0.45 s)"
+    assert any(line.startswith("waiting for a HEARTBEAT on udpin:127.0.0.1:14598: ") and "s of up to 0.45 s" in line for line in lines[1:]), lines
 
 
 @pytest.mark.parametrize("profile", ["px4", "ardupilot"])
