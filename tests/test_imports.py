@@ -122,28 +122,14 @@ def test_the_checker_finds_a_circle() -> None:
     assert _cycles({"a": {"b"}, "b": set()}) == []
 
 
-# The one circle left: PathFollower.from_config / controller_from_config (control/) import the YAML
-# layer (config.py), which imports control's types. control/ is being changed elsewhere; moving those
-# two constructors out of control/ removes it. Strict: the test fails once the circle is gone, so
-# this marker is removed then.
-CORE_IMPORTS_CONFIG = pytest.mark.xfail(strict=True, reason="control.follower / control.select import pf_offboard.config")
 
-
-@pytest.mark.parametrize("package", [pytest.param("pf_offboard", marks=CORE_IMPORTS_CONFIG), "sitl_mock"])
+@pytest.mark.parametrize("package", ["pf_offboard", "sitl_mock"])
 def test_no_import_circles(package: str) -> None:
     graph = _graph()
     cycles = [c for c in _cycles(graph) if c[0].split(".")[0] == package]
     assert not cycles, "import circles: " + "; ".join(" <-> ".join(c) for c in cycles)
 
 
-def test_no_import_circles_outside_the_core_and_config() -> None:
-    """Every circle in pf_offboard other than the known core <-> config one."""
-    known = {"pf_offboard.config", "pf_offboard.control.follower", "pf_offboard.control.select"}
-    cycles = [c for c in _cycles(_graph()) if c[0].startswith("pf_offboard") and not set(c) <= known]
-    assert not cycles, "import circles: " + "; ".join(" <-> ".join(c) for c in cycles)
-
-
-@CORE_IMPORTS_CONFIG
 def test_the_core_imports_neither_the_yaml_layer_nor_the_app() -> None:
     graph = _graph()
     bad = {
