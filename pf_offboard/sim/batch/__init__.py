@@ -17,7 +17,7 @@ Vectors are tuples of three ``(N,)`` arrays ``(x, y, z)``: the scalar code's flo
 translate one to one.
 """
 
-# from pf_offboard.sim.batch.follower import BatchCommand, BatchFollower
-# from pf_offboard.sim.batch.projection import BatchProjector
+from pf_offboard.sim.batch.follower import BatchCommand, BatchFollower
+from pf_offboard.sim.batch.projection import BatchProjector
 
 __all__ = ["BatchCommand", "BatchFollower", "BatchProjector"]

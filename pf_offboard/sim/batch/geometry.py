@@ -195,3 +195,28 @@ def cross_jet(a: Jet, b: Jet) -> Jet:
             a2x * by - a2y * bx + 2.0 * (a1x * b1y - a1y * b1x) + ax * b2y - ay * b2x,
         ),
     )
+
+
+# ---------------------------------------------------------------------------------- libm parity
+# NumPy's hypot, pow, atan2, acos, asin and exp may differ from Python's math module in the last
+# bit; the batch must round exactly like the scalar code (a bisection step or a saturation test
+# decided by one ulp would otherwise make flights drift apart), so these go through math per
+# element (~0.1 us each: a few calls per control step).
+def hypot(a: Arr, b: Arr) -> Arr:
+    import math
+
+    return np.fromiter(map(math.hypot, a.tolist(), b.tolist()), float, count=a.size).reshape(a.shape)
+
+
+def power(a: Arr, e: float) -> Arr:
+    return np.fromiter(map(pow, a.tolist(), [e] * a.size), float, count=a.size).reshape(a.shape)
+
+
+def atan2(y: Arr, x: Arr) -> Arr:
+    import math
+
+    return np.fromiter(map(math.atan2, y.tolist(), x.tolist()), float, count=y.size).reshape(y.shape)
+
+
+def unary(fn: object, a: Arr) -> Arr:
+    return np.fromiter(map(fn, a.tolist()), float, count=a.size).reshape(a.shape)  # type: ignore[call-overload]
