@@ -29,7 +29,7 @@ from pf_offboard.sim.batch.geometry import atan2, unary
 Arr = NDArray[np.float64]
 Mask = NDArray[np.bool_]
 
-MOTORS_OFF, ACCEL, ATTITUDE, RATES = 0, 1, 2, 3
+MOTORS_OFF, ACCEL, ATTITUDE, RATES, POSITION = 0, 1, 2, 3, 4
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,8 @@ class BatchSetpoint:
     thrust_norm: Arr
     rates_frd_rad_s: Arr  # (3, N): the rate setpoint (RATES) or the feed-forward (ATTITUDE)
     has_ff: Mask
+    position_ned_m: Arr | None = None  # (3, N), POSITION (the autopilot's position controller)
+    velocity_ned_m_s: Arr | None = None  # (3, N), POSITION's velocity feed-forward
 
     @staticmethod
     def motors_off(n: int) -> BatchSetpoint:
@@ -60,7 +62,17 @@ class BatchSetpoint:
             np.where(mask, other.yaw_rad, self.yaw_rad), np.where(mask, other.yaw_rate_rad_s, self.yaw_rate_rad_s),
             np.where(mask, other.q_ned_frd, self.q_ned_frd), np.where(mask, other.thrust_norm, self.thrust_norm),
             np.where(mask, other.rates_frd_rad_s, self.rates_frd_rad_s), np.where(mask, other.has_ff, self.has_ff),
+            _take_opt(mask, self.position_ned_m, other.position_ned_m), _take_opt(mask, self.velocity_ned_m_s, other.velocity_ned_m_s),
         )  # fmt: skip
+
+
+def _take_opt(mask: Mask, a: Arr | None, b: Arr | None) -> Arr | None:
+    if a is None and b is None:
+        return None
+    n = mask.shape[0]
+    a = np.zeros((3, n)) if a is None else a
+    b = np.zeros((3, n)) if b is None else b
+    return np.where(mask, b, a)
 
 
 def _p_or_sqrt(k: float, accel_max: float, e: Arr) -> Arr:
@@ -155,6 +167,7 @@ class BatchSimulator:
         self._thrust_setpoint = sp
         self._sp_kind = sp.kind.copy()
         self._yaw_hold = np.full(n, math.nan)
+        self._vel_int = [z.copy(), z.copy(), z.copy()]
         wind = np.zeros((3, n)) if wind_ned_m_s is None else np.asarray(wind_ned_m_s, dtype=float).reshape(3, n)
         self._wind_now = (wind[0].copy(), wind[1].copy(), wind[2].copy())
 
@@ -236,6 +249,8 @@ class BatchSimulator:
     def _select(self, sp: BatchSetpoint) -> None:
         kind = sp.kind
         changed = kind != self._sp_kind
+        vi = changed & (kind != POSITION)
+        self._vel_int = [np.where(vi, 0.0, a) for a in self._vel_int]
         self._yaw_hold = np.where(changed & ((kind == ATTITUDE) | (kind == RATES) | (kind == MOTORS_OFF)), math.nan, self._yaw_hold)
         from_off = changed & (self._sp_kind == MOTORS_OFF)
         self.ix = np.where(from_off, 0.0, self.ix)
@@ -274,9 +289,10 @@ class BatchSimulator:
         sp = self._setpoint
         kind = self._sp_kind
         qw, qx, qy, qz = self.qw, self.qx, self.qy, self.qz
+        pos_k = on & (kind == POSITION)
         acc = on & (kind == ACCEL)
         att = on & (kind == ATTITUDE)
-        ctl = acc | att
+        ctl = acc | att | pos_k
         if not ctl.any():
             return self._rs
         # acceleration
@@ -289,22 +305,69 @@ class BatchSimulator:
                 self._yaw_hold = np.where(latch, yl, self._yaw_hold)
             self._yaw_hold = np.where(hold, self._yaw_hold + sp.yaw_rate_rad_s * self._att_dt, self._yaw_hold)
         self._yaw_hold = np.where(acc & ~hold, math.nan, self._yaw_hold)
-        yaw = np.where(hold, self._yaw_hold, np.where(acc, yaw, 0.0))
-        qd_a, thrust_a = self._accel_to_attitude(sp.accel_ned_m_s2, yaw)
+        if pos_k.any():  # the position controller (hold / brake): yaw given, or held
+            phold = pos_k & np.isnan(sp.yaw_rad)
+            if phold.any():
+                latch = phold & np.isnan(self._yaw_hold)
+                yl = atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+                self._yaw_hold = np.where(latch, yl, self._yaw_hold)
+                self._yaw_hold = np.where(phold, self._yaw_hold + 0.0 * self._att_dt, self._yaw_hold)
+            self._yaw_hold = np.where(pos_k & ~phold, math.nan, self._yaw_hold)
+            yaw = np.where(pos_k, np.where(phold, self._yaw_hold, sp.yaw_rad), yaw)
+        yaw = np.where(hold, self._yaw_hold, np.where(acc | pos_k, yaw, 0.0))
+        accel = sp.accel_ned_m_s2
+        if pos_k.any():
+            pa = self._position_control(sp, pos_k)
+            accel = np.where(pos_k, pa, accel)
+        qd_a, thrust_a = self._accel_to_attitude(accel, yaw)
         if self._split_thrust:
             use_t = self._flown_uses_thrust_path()
             thrust_t = self._accel_to_attitude(self._thrust_setpoint.accel_ned_m_s2, yaw)[1]
-            thrust_a = np.where(use_t, thrust_t, thrust_a)
+            thrust_a = np.where(use_t & acc, thrust_t, thrust_a)
+        acc_only = acc
+        acc = acc | pos_k  # both fly the acceleration mapping
         qd = tuple(np.where(acc, qa, sp.q_ned_frd[i]) for i, qa in enumerate(qd_a))
         thrust = np.where(acc, thrust_a, self._flown_thrust_norm())
         ffm = att & sp.has_ff
         ff = (np.where(ffm, sp.rates_frd_rad_s[0], 0.0), np.where(ffm, sp.rates_frd_rad_s[1], 0.0), np.where(ffm, sp.rates_frd_rad_s[2], 0.0))
-        yaw_rate_w = np.where(acc, sp.yaw_rate_rad_s, 0.0)
+        yaw_rate_w = np.where(acc_only, sp.yaw_rate_rad_s, 0.0)
         self._q_sp = tuple(np.where(ctl, qd[i], self._q_sp[i]) for i in range(4))  # type: ignore[assignment]
         self._thrust_sp = np.where(ctl, thrust, self._thrust_sp)
         rx, ry, rz = self._attitude_control(qw, qx, qy, qz, qd, ff, yaw_rate_w)
         rs = self._rs
         return (np.where(ctl, rx, rs[0]), np.where(ctl, ry, rs[1]), np.where(ctl, rz, rs[2]), np.where(ctl, thrust * self._tmax, rs[3]))
+
+    def _position_control(self, sp: BatchSetpoint, rows: Mask) -> Arr:
+        """``Simulator._position_control``: cascaded P (position) -> PI (velocity) -> acceleration."""
+        from pf_offboard.sim.batch.geometry import hypot
+
+        pr = self.params
+        assert sp.position_ned_m is not None and sp.velocity_ned_m_s is not None
+        tx, ty, tz = sp.position_ned_m
+        fx, fy, fz = sp.velocity_ned_m_s
+        kp = pr.position_p_1_s
+        vsx = fx + kp * (tx - self.px)
+        vsy = fy + kp * (ty - self.py)
+        vh = hypot(vsx, vsy)
+        big = vh > pr.velocity_max_xy_m_s
+        s = pr.velocity_max_xy_m_s / np.where(big, vh, 1.0)
+        vsx, vsy = np.where(big, vsx * s, vsx), np.where(big, vsy * s, vsy)
+        vsz = np.where(tz >= 0.0, pr.land_speed_m_s,
+                       np.minimum(np.maximum(fz + kp * (tz - self.pz), -pr.velocity_max_up_m_s), pr.velocity_max_down_m_s))  # fmt: skip
+        ex, ey, ez = vsx - self.vx, vsy - self.vy, vsz - self.vz
+        vi = self._vel_int
+        upd = rows & ~self.landed
+        ki, dt = pr.velocity_i_1_s2, self._att_dt
+        lim = 0.5 * GRAVITY_M_S2
+        for i, e in enumerate((ex, ey, ez)):
+            vi[i] = np.where(upd, np.minimum(np.maximum(vi[i] + ki * e * dt, -lim), lim), vi[i])
+        kv = pr.velocity_p_1_s
+        ax, ay, az = kv * ex + vi[0], kv * ey + vi[1], kv * ez + vi[2]
+        ah_max = GRAVITY_M_S2 * math.tan(pr.tilt_max_rad)
+        ah = hypot(ax, ay)
+        big = ah > ah_max
+        s = ah_max / np.where(big, ah, 1.0)
+        return np.array((np.where(big, ax * s, ax), np.where(big, ay * s, ay), az))
 
     def _accel_to_attitude(self, accel_ned: Arr, yaw: Arr) -> tuple[tuple[Arr, Arr, Arr, Arr], Arr]:
         g = GRAVITY_M_S2
@@ -444,6 +507,7 @@ class BatchSimulator:
                 qw, qx, qy, qz = qw * nq, qx * nq, qy * nq, qz * nq
                 if not none_on:
                     self.qw, self.qx, self.qy, self.qz = qw, qx, qy, qz
+                    self.px, self.py, self.pz, self.vx, self.vy, self.vz = px, py, pz, vx, vy, vz
                     self.landed = landed
                     rsx, rsy, rsz, cc = self._control_tick(on)
                     if not airmode:
