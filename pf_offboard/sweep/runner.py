@@ -171,27 +171,32 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
                                 math.nan))  # fmt: skip
             row["first_in_tube_time_s"] = math.nan
             return row
-    ground = result.crashed or result.reason.startswith("on the ground")
-    act, conv = judge.activation_s, judge.converged_s
-    reason = result.reason
+    summ = result.summary
+    judge_numbers = (judge.activation_s, judge.converged_s, judge.first_converged_s, judge.last_out_s, judge.max_out_m,
+                     judge.max_after_m, judge.rms_after_m)  # fmt: skip
+    return finish_row(row, s, result.reason, bool(result.crashed), result.sim_time_s, summ.whole_cross_track_max_m, *judge_numbers)
+
+
+def finish_row(row: dict[str, Any], s: FlightSettings, reason: str, crashed: bool, sim_time_s: float, ct_max: float | None,
+               act: float | None, conv: float | None, first: float | None, last: float | None, max_out_m: float,
+               max_after_m: float, rms_after_m: float) -> dict[str, Any]:  # fmt: skip
+    """The row's outcome columns from what a flight produced (shared by both engines: the same
+    numbers give the same row)."""
+    ground = crashed or reason.startswith("on the ground")
     if ground:
         success = False
     elif act is None or conv is None:
-        first, last = judge.first_converged_s, judge.last_out_s
         if first is not None and last is not None:
             success, reason = False, (f"{reason}; within {s.tube_m:g} m at {first:.2f} s, then beyond {s.stay_m:g} m "
-                                      f"(max {judge.max_out_m:.2f} m, last at {last:.2f} s) and not back by the end")  # fmt: skip
+                                      f"(max {max_out_m:.2f} m, last at {last:.2f} s) and not back by the end")  # fmt: skip
         else:
             success, reason = False, f"{reason}; never within {s.tube_m:g} m of the path"
-    elif result.sim_time_s - conv < s.settle_s - 1e-9:
-        success, reason = False, f"{reason}; converged only {result.sim_time_s - conv:.2f} s before the end"
+    elif sim_time_s - conv < s.settle_s - 1e-9:
+        success, reason = False, f"{reason}; converged only {sim_time_s - conv:.2f} s before the end"
     else:
         success = True
-    summ = result.summary
-    row.update(_outcome(success, bool(result.crashed), ground, reason, act, None if conv is None or act is None else conv - act,
-                        summ.whole_cross_track_max_m, judge.max_after_m if conv is not None else math.nan, judge.rms_after_m,
-                        result.sim_time_s))  # fmt: skip
-    first = judge.first_converged_s
+    row.update(_outcome(success, crashed, ground, reason, act, None if conv is None or act is None else conv - act,
+                        ct_max, max_after_m if conv is not None else math.nan, rms_after_m, sim_time_s))  # fmt: skip
     row["first_in_tube_time_s"] = first - act if (first is not None and act is not None) else math.nan
     return row
 

@@ -1,0 +1,295 @@
+"""Sweep flights for N thrown starts at once: the in-process ``sim`` flight
+(:class:`pf_offboard.sim.flight.SimFlight`) mirrored on arrays.
+
+What a scalar sweep flight does per control step, in the same order, for every flight together:
+the mock autopilot's telemetry (truth plus the estimator's error, rounded to float32 as MAVLink
+carries it, stamped in whole milliseconds), the app's estimator (NED -> ENU, the velocity
+correction), the controller (:class:`~pf_offboard.sim.batch.follower.BatchFollower`), the encoder
+(acceleration setpoints, tilt-from-gravity as the autopilot reports it, float32 on the wire), the
+mock's OFFBOARD handling (the position hold before the first setpoint, then the acceleration
+setpoints) and its dynamics (:class:`~pf_offboard.sim.batch.dynamics.BatchSimulator`); the
+sweep's judge and the flight summary's figures as arrays. Rows come out as the scalar engine's.
+
+Mirrored: the PX4 profile with ``acceleration`` output, engaged at once (``throw_engage_after_s``
+0, what sweeps fly), constant wind. Anything else — ArduPilot, attitude / rates output, kept logs,
+the trajectory-tracking baseline, ``any_state`` feed-forward — is flown by the scalar engine
+(:func:`supported` says why); so is any single flight that leaves the mirrored path (a command
+that is not finite, an implausible estimator jump).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pf_offboard import frames
+from pf_offboard.sim.batch.dynamics import ACCEL, POSITION, BatchSetpoint, BatchSimulator
+from pf_offboard.sim.batch.follower import BatchFollower
+
+Arr = NDArray[np.float64]
+
+
+def _f32(a: Arr) -> Arr:
+    """What a MAVLink float field carries back: the value rounded to float32."""
+    return np.asarray(a, dtype=np.float64).astype(np.float32).astype(np.float64)
+
+
+class _Setup:
+    """The scalar objects of one group of flights (one config text, one FlightSettings)."""
+
+    def __init__(self, config_yaml: str, settings: Any) -> None:
+        from sitl_mock.dynamics import preset
+
+        from pf_offboard.app.fly import flight_settings
+        from pf_offboard.app.profiles import PROFILES
+        from pf_offboard.config import load_config
+        from pf_offboard.control import PathFollower, controller_from_config
+        from pf_offboard.sim.flight import MAX_RATE_HZ
+
+        with tempfile.TemporaryDirectory(prefix="pf-batch-") as tmp:
+            p = Path(tmp) / "config.yaml"
+            p.write_text(config_yaml, encoding="utf-8")
+            config = load_config(p)
+        self.config = config
+        fs = flight_settings(config, argparse.Namespace(output=settings.output_mode, end_action=None))
+        self.flight = fs
+        self.rate_hz = settings.rate_hz if settings.rate_hz is not None else min(fs.setpoint_rate_hz, MAX_RATE_HZ)
+        self.dt_s = 1.0 / self.rate_hz
+        self.follower = controller_from_config(config)
+        self.is_follower = isinstance(self.follower, PathFollower)
+        self.profile = PROFILES[settings.autopilot]
+        self.vehicle = preset(settings.vehicle)
+        self.settings = settings
+        tilt_param = 1.0 if self.vehicle.accel_decouple else 0.0  # MPC_ACC_DECOUPLE as the mock reports it
+        self.tilt_from_gravity = self.profile.tilts_from_gravity(tilt_param)
+
+    def unsupported(self, logs: bool) -> str | None:
+        if logs:
+            return "kept logs"
+        if self.settings.autopilot != "px4":
+            return f"autopilot {self.settings.autopilot}"
+        if self.flight.output_mode != "acceleration":
+            return f"output {self.flight.output_mode}"
+        if not self.is_follower:
+            return "the trajectory-tracking controller"
+        if self.follower.feedforward != "on_path":
+            return f"feedforward {self.follower.feedforward}"
+        if not 20.0 <= self.rate_hz <= 250.0:
+            return "rate out of range"
+        return None
+
+
+def supported(task: Any) -> str | None:
+    """None when the batch engine flies ``task`` (a :class:`~pf_offboard.sweep.runner.FlightTask`),
+    else what makes it a scalar flight."""
+    try:
+        return _Setup(task.config_yaml, task.settings).unsupported(task.logs_dir is not None)
+    except Exception as exc:  # a broken config: the scalar engine reports it as its row
+        return f"{type(exc).__name__}"
+
+
+def _tilt_from_gravity(ax: Arr, ay: Arr, az: Arr) -> tuple[Arr, Arr, Arr]:
+    """:func:`pf_offboard.app.encoders.tilt_from_gravity_setpoint`."""
+    from pf_offboard.app.encoders import _TILT_FROM_GRAVITY_FLOOR, G_M_S2
+
+    scale = 1.0 / (np.maximum(G_M_S2 + az, _TILT_FROM_GRAVITY_FLOOR * G_M_S2) / G_M_S2)
+    return ax * scale, ay * scale, az
+
+
+def _wrap_pi(a: Arr) -> Arr:
+    r = np.fmod(a + math.pi, 2.0 * math.pi)
+    return np.where(r <= 0.0, r + 2.0 * math.pi, r) - math.pi
+
+
+def fly(tasks: Sequence[Any]) -> tuple[dict[tuple[int, int], dict[str, Any]], list[Any]]:
+    """Fly tasks that share their config text and settings, all at once.
+
+    Returns (rows by task key, the tasks the scalar engine must fly: flights that left the
+    mirrored path)."""
+    from pf_offboard.app.estimator import VELOCITY_CORRECTION_GAP_S, VELOCITY_CORRECTION_MAX_M_S, VELOCITY_RESIDUAL_MAX_M_S
+    from pf_offboard.sim.flight import AUTOPILOT_SYSTEM_ID  # noqa: F401  (the same module's constants)
+    from pf_offboard.sweep.runner import finish_row
+    from sitl_mock.dynamics.sim import PHYSICS_DT_S
+
+    setup = _Setup(tasks[0].config_yaml, tasks[0].settings)
+    why = setup.unsupported(False)
+    if why is not None:
+        raise ValueError(f"the batch engine does not fly {why}")
+    s = setup.settings
+    n = len(tasks)
+    dt = setup.dt_s
+    # ---- spawns, as SimFlight._make_autopilot builds them
+    pos, vel, q, w, wind, rngs = [], [], [], [], [], []
+    for t in tasks:
+        st = t.start
+        pos.append(tuple(map(float, frames.enu_to_ned(st.position_enu_m))))
+        vel.append(tuple(map(float, frames.enu_to_ned(st.velocity_enu_m_s))))
+        q.append(tuple(map(float, frames.quat_enu_flu_to_ned_frd(st.q_enu_flu))))
+        w.append(tuple(map(float, frames.flu_to_frd(st.body_rates_flu_rad_s))))
+        wind.append(tuple(map(float, frames.enu_to_ned(st.wind_enu_m_s))))
+        rngs.append(np.random.default_rng(st.sim_seed).spawn(2)[0])  # Autopilot: (dynamics, faults)
+    P, Vv, Q, W = np.array(pos).T, np.array(vel).T, np.array(q).T, np.array(w).T
+    sim = BatchSimulator(setup.vehicle, rngs, P, Vv, Q, W, wind_ned_m_s=np.array(wind).T)
+    # the OFFBOARD entry at the first step: hold the stopping point (estimate = truth at t = 0)
+    speed = np.sqrt(Vv[0] ** 2 + Vv[1] ** 2 + Vv[2] ** 2)
+    speed = np.array([float(np.linalg.norm(Vv[:, i])) for i in range(n)])
+    hold = P + Vv * speed / (2.0 * 3.0)
+    qn = Q / np.sqrt(np.sum(Q * Q, axis=0))
+    hold_yaw = np.array([math.atan2(2.0 * (a * d + b * c), 1.0 - 2.0 * (c * c + d * d)) for a, b, c, d in qn.T.tolist()])
+    follower = BatchFollower(setup.follower, n)
+    timed = follower.compensator is not None
+    profiled = follower.profile is not None
+    speed_ref = float(setup.follower.speed)
+    tau = setup.flight.velocity_correction_s
+    bias = np.zeros((3, n))
+    prev: tuple[float, Arr, Arr] | None = None
+    # ---- the judge (runner._Judge) and the summary's whole-flight maximum, as arrays
+    nan = math.nan
+    tube, stay = s.tube_m, s.stay_m
+    tol = s.speed_tol_m_s if s.speed_tol_m_s is not None else math.inf
+    act = np.full(n, nan)
+    conv = np.full(n, nan)
+    last_out = np.full(n, nan)
+    first = np.full(n, nan)
+    max_out = np.zeros(n)
+    max_after = np.zeros(n)
+    sum2 = np.zeros(n)
+    cnt = np.zeros(n, dtype=np.int64)
+    ct_max = np.full(n, -math.inf)
+    ct_any = np.zeros(n, dtype=bool)
+    alive = np.ones(n, dtype=bool)
+    fallback = np.zeros(n, dtype=bool)
+    reason = [""] * n
+    end_t = np.zeros(n)
+    crashed_end = np.zeros(n, dtype=bool)
+    duration = s.duration_s
+    max_steps = int(math.ceil(duration / dt)) + 1
+    ident = np.tile([[1.0], [0.0], [0.0], [0.0]], n)
+    zeros3 = np.zeros((3, n))
+    false = np.zeros(n, dtype=bool)
+    for i in range(max_steps):
+        t_ap = sim.time_s
+        # ---- telemetry: LOCAL_POSITION_NED (truth + estimator error, float32, whole ms)
+        ep, ev = sim.estimate_error()
+        p_ned = _f32(np.array((sim.px, sim.py, sim.pz)) + ep)
+        v_ned = _f32(np.array((sim.vx, sim.vy, sim.vz)) + ev)
+        t_est = (int((t_ap + 0.0) * 1000.0) & 0xFFFFFFFF) * 1e-3
+        # ---- the app's estimator
+        if prev is not None:
+            dts = t_est - prev[0]
+            allowed = 1.0 + (np.maximum(np.sqrt(np.sum(prev[2] ** 2, axis=0)), np.sqrt(np.sum(v_ned**2, axis=0))) + 5.0) * max(dts, 0.0)
+            jump = np.sqrt(np.sum((p_ned - prev[1]) ** 2, axis=0)) > 0.5 * allowed
+            fallback |= alive & jump  # near the estimator's plausibility bound: fly it scalar
+        if tau is not None:
+            if prev is not None and 0.0 < t_est - prev[0] <= VELOCITY_CORRECTION_GAP_S:
+                dts = t_est - prev[0]
+                residual = (p_ned - prev[1]) / dts - 0.5 * (v_ned + prev[2])
+                residual = np.clip(residual, -VELOCITY_RESIDUAL_MAX_M_S, VELOCITY_RESIDUAL_MAX_M_S)
+                out = bias + (1.0 - math.exp(-dts / tau)) * (residual - bias)
+                rough = np.sqrt(np.sum(out * out, axis=0))
+                for k in np.flatnonzero(rough > 0.99 * VELOCITY_CORRECTION_MAX_M_S).tolist():
+                    norm = float(np.linalg.norm(out[:, k]))
+                    if norm > VELOCITY_CORRECTION_MAX_M_S:
+                        out[:, k] = out[:, k] * (VELOCITY_CORRECTION_MAX_M_S / norm)
+                bias = out
+            v_used = v_ned + bias
+        else:
+            v_used = v_ned
+        prev = (t_est, p_ned, v_ned)
+        y_enu = np.stack((p_ned[1], p_ned[0], -p_ned[2]), axis=1)
+        v_enu = np.stack((v_used[1], v_used[0], -v_used[2]), axis=1)
+        # ---- the pipeline: active from the second sample on (the first is the engage step)
+        active = i > 0
+        if active and i == 1 and timed:
+            follower.reset()
+        cmd = follower.update(y_enu, v_enu, t_est if timed else None)
+        fallback |= alive & ~cmd.finite
+        if active:
+            # ---- the judge and the summary (active records only)
+            tt = t_est
+            act = np.where(alive & np.isnan(act), tt, act)
+            ct = cmd.cross_track_m
+            fin = np.isfinite(ct)
+            upd = alive & fin
+            ct_max = np.where(upd, np.maximum(ct_max, np.where(fin, ct, -math.inf)), ct_max)
+            ct_any |= upd
+            out_ = alive & ~(ct <= stay)
+            last_out = np.where(out_, tt, last_out)
+            had = out_ & ~np.isnan(first)
+            max_out = np.where(had, np.maximum(max_out, np.where(fin, ct, math.inf)), max_out)
+            conv = np.where(out_, nan, conv)
+            max_after = np.where(out_, 0.0, max_after)
+            sum2 = np.where(out_, 0.0, sum2)
+            cnt = np.where(out_, 0, cnt)
+            inn = alive & ~out_
+            ref = cmd.eta2_ref_m_s if profiled else speed_ref
+            start = inn & np.isnan(conv) & (ct <= tube) & (np.abs(cmd.eta2 - ref) <= tol)
+            conv = np.where(start, tt, conv)
+            first = np.where(start & np.isnan(first), tt, first)
+            acc_ = inn & ~np.isnan(conv)
+            max_after = np.where(acc_, np.maximum(max_after, ct), max_after)
+            sum2 = np.where(acc_, sum2 + ct * ct, sum2)
+            cnt = np.where(acc_, cnt + 1, cnt)
+        # ---- end of the flight (SimFlight._end_reason), after the step's record
+        if t_ap >= duration - 1e-9:
+            for k in np.flatnonzero(alive).tolist():
+                reason[k] = f"duration {duration:g} s reached"
+            end_t[alive] = t_ap
+            crashed_end[alive] = sim.crashed[alive]
+            alive[:] = False
+        else:
+            c = alive & sim.crashed
+            g = alive & ~sim.crashed & sim.landed & (t_ap > 0.0)
+            for k in np.flatnonzero(c).tolist():
+                reason[k] = "crashed"
+            for k in np.flatnonzero(g).tolist():
+                reason[k] = "on the ground"
+            ended = c | g
+            end_t[ended] = t_ap
+            crashed_end[ended] = sim.crashed[ended]
+            alive &= ~ended
+        if not alive.any():
+            break
+        # ---- the encoder and the mock's OFFBOARD handling
+        if i == 0:  # no setpoint taken yet: the position hold at the stopping point
+            sp = BatchSetpoint(np.full(n, POSITION, dtype=np.int64), zeros3, hold_yaw, np.zeros(n), ident, np.zeros(n), zeros3, false,
+                               hold, zeros3)  # fmt: skip
+        else:
+            a = cmd.acceleration
+            ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
+            if setup.tilt_from_gravity:
+                ax, ay, az = _tilt_from_gravity(ax, ay, az)
+            acc_ned = _f32(np.array((ay, ax, -az)))
+            yaw_ned = _f32(_wrap_pi(math.pi / 2.0 - cmd.yaw))
+            yaw_rate_ned = _f32(-cmd.yaw_rate)
+            sp = BatchSetpoint(np.full(n, ACCEL, dtype=np.int64), acc_ned, yaw_ned, yaw_rate_ned, ident, np.zeros(n), zeros3, false)
+        sim.advance(dt, sp)
+        if sim.crashed.any():  # the mock disarms on a crash (the flight ends at the next check)
+            pass
+    else:
+        for k in np.flatnonzero(alive).tolist():
+            reason[k] = f"time limit {max_steps * dt:.0f} s reached"
+    rows: dict[tuple[int, int], dict[str, Any]] = {}
+    redo = []
+    for k, task in enumerate(tasks):
+        if fallback[k]:
+            redo.append(task)
+            continue
+        row: dict[str, Any] = task.gains.columns() if task.gains is not None else {}
+        row.update(task.start.columns())
+
+        def opt(a: Arr) -> float | None:
+            return None if math.isnan(float(a[k])) else float(a[k])
+
+        rms = math.sqrt(sum2[k] / cnt[k]) if cnt[k] else math.nan
+        rows[task.key] = finish_row(row, s, reason[k], bool(crashed_end[k]), float(end_t[k]),
+                                    float(ct_max[k]) if ct_any[k] else None, opt(act), opt(conv), opt(first), opt(last_out),
+                                    float(max_out[k]), float(max_after[k]), rms)  # fmt: skip
+    return rows, redo
