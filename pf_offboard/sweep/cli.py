@@ -29,6 +29,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cluster", metavar="ADDRESS",
                         help="run on Dask: a scheduler address (tcp://host:8786) or 'local' (a LocalCluster of --workers "
                         "processes); needs pip install 'pf-offboard[cluster]'")
+    parser.add_argument("--engine", choices=("batch", "scalar"), default="batch",
+                        help="batch (default): many flights per process stepped as arrays, the same rows as scalar; "
+                        "scalar: one flight at a time (the reference; flights batch does not mirror always fly so)")
     g = parser.add_argument_group("flights")
     g.add_argument("--vehicle", choices=PRESET_NAMES, default=f.vehicle, help=f"simulated airframe (default {f.vehicle})")
     g.add_argument("--autopilot", choices=("px4", "ardupilot"), default=f.autopilot, help="mock autopilot profile (default px4)")
@@ -116,13 +119,13 @@ def run(args: argparse.Namespace) -> int:
             if progress is not None:
                 progress(row)
 
-        result = plan.run(args.config, spec, args.workers, args.cluster, on_row, logs_dir)
+        result = plan.run(args.config, spec, args.workers, args.cluster, on_row, logs_dir, engine=args.engine)
     files = report.write_table(result.rows, out)
     (out / report.JOURNAL_CSV).unlink()
     from dataclasses import asdict
 
     stats = report.summarize(result.rows, args.config, asdict(spec.settings))
-    summary = {**stats, "wall_time_s": result.wall_s, "executor": result.executor, "workers": args.workers,
+    summary = {**stats, "wall_time_s": result.wall_s, "executor": result.executor, "engine": args.engine, "workers": args.workers,
                "cpu_count": os.cpu_count(), "load_average_at_end": list(os.getloadavg()), "config": args.config,
                "settings": plan.settings_dict(spec)}  # fmt: skip
     print(f"pf-offboard sweep: {len(result.rows)} flights in {result.wall_s:.1f} s ({result.executor})")

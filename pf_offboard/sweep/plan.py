@@ -88,14 +88,15 @@ def tasks(config_path: str | Path, spec: SweepSpec, logs_dir: str | Path | None 
 
 def run(config_path: str | Path, spec: SweepSpec, workers: int = 1, cluster: str | None = None,
         on_row: Callable[[dict[str, Any]], None] | None = None, logs_dir: str | Path | None = None,
-        client: Any = None) -> SweepResult:  # fmt: skip
+        client: Any = None, engine: str = "batch") -> SweepResult:  # fmt: skip
     """Run every flight (see :func:`pf_offboard.sweep.runner.execute`) and time it."""
     todo = tasks(config_path, spec, logs_dir)
     t0 = time.perf_counter()
-    rows = execute(todo, workers, cluster, on_row, client=client)
+    rows = execute(todo, workers, cluster, on_row, client=client, engine=engine)
     wall = time.perf_counter() - t0
     executor = (f"dask {cluster}" if cluster else "dask client") if (cluster or client is not None) else (
         "serial" if workers == 1 else f"process pool ({workers} workers)")  # fmt: skip
+    executor = f"{engine} engine, {executor}"
     return SweepResult(rows, wall, executor)
 
 

@@ -266,22 +266,56 @@ def check_workers(workers: int) -> int:
     return workers
 
 
+ENGINES = ("batch", "scalar")
+
+
 def execute(tasks: Sequence[FlightTask], workers: int = 1, cluster: str | None = None,
-            on_row: Callable[[dict[str, Any]], None] | None = None, client: Any = None) -> list[dict[str, Any]]:  # fmt: skip
+            on_row: Callable[[dict[str, Any]], None] | None = None, client: Any = None,
+            engine: str = "batch") -> list[dict[str, Any]]:  # fmt: skip
     """Every task's row, sorted by (gain candidate, flight), whatever ran them (module docstring).
 
     ``on_row``: called with each row as it comes back (a :class:`Progress`, a journal);
-    ``client``: an existing ``distributed.Client`` (tests, notebooks) instead of ``cluster``."""
+    ``client``: an existing ``distributed.Client`` (tests, notebooks) instead of ``cluster``;
+    ``engine``: ``batch`` flies the flights it mirrors as arrays, many per process
+    (:mod:`pf_offboard.sim.batch.flight`), and the rest one by one like ``scalar``: the same rows."""
     check_workers(workers)
+    if engine not in ENGINES:
+        raise InputError("--engine", f"must be one of {', '.join(ENGINES)}, got {engine!r}")
+    if engine == "batch":
+        return _collect(_batched(tasks, workers, cluster, client), len(tasks), on_row)
+    return _collect(_scalar(tasks, workers, cluster, client), len(tasks), on_row)
+
+
+def _scalar(tasks: Sequence[FlightTask], workers: int, cluster: str | None, client: Any) -> Iterable[tuple[tuple[int, int], dict[str, Any]]]:
+    if not tasks:
+        return iter(())
     if cluster is not None or client is not None:
         from pf_offboard.sweep.engine import run_on_dask
 
-        done = run_on_dask(tasks, run_flight, cluster, workers, client=client)
-    elif workers == 1:
-        done = ((t.key, run_flight(t)) for t in tasks)
+        return run_on_dask(tasks, run_flight, cluster, workers, client=client)
+    if workers == 1:
+        return ((t.key, run_flight(t)) for t in tasks)
+    return _pool(tasks, workers)
+
+
+def _batched(tasks: Sequence[FlightTask], workers: int, cluster: str | None, client: Any) -> Iterable[tuple[tuple[int, int], dict[str, Any]]]:
+    """Chunks of the batch engine, then the scalar flights (unsupported, or handed back)."""
+    from pf_offboard.sim.batch.flight import plan_chunks, run_chunk
+
+    dask = cluster is not None or client is not None
+    chunks, scalar = plan_chunks(tasks, workers if not dask else max(workers, 2))
+    if dask:
+        from pf_offboard.sweep.engine import run_on_dask
+
+        done = run_on_dask(chunks, run_chunk, cluster, workers, client=client)
+    elif workers == 1 or len(chunks) <= 1:
+        done = ((c.key, run_chunk(c)) for c in chunks)
     else:
-        done = _pool(tasks, workers)
-    return _collect(done, len(tasks), on_row)
+        done = _pool(chunks, workers, run_chunk)  # type: ignore[arg-type]
+    for _, result in done:
+        yield from result["rows"]
+        scalar.extend(result["redo"])
+    yield from _scalar(scalar, workers, cluster, client)
 
 
 def rows_equal(a: Sequence[dict[str, Any]], b: Sequence[dict[str, Any]]) -> bool:
@@ -294,11 +328,11 @@ def rows_equal(a: Sequence[dict[str, Any]], b: Sequence[dict[str, Any]]) -> bool
     return len(a) == len(b) and all(ra.keys() == rb.keys() and all(same(ra[k], rb[k]) for k in ra) for ra, rb in zip(a, b))
 
 
-def _pool(tasks: Sequence[FlightTask], workers: int) -> Iterable[tuple[tuple[int, int], dict[str, Any]]]:
+def _pool(tasks: Sequence[Any], workers: int, fn: Callable[[Any], Any] | None = None) -> Iterable[tuple[Any, Any]]:
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(run_flight, t): t.key for t in tasks}
+    with ProcessPoolExecutor(max_workers=min(workers, max(len(tasks), 1))) as pool:
+        futures = {pool.submit(fn or run_flight, t): t.key for t in tasks}
         try:
             for fut in as_completed(futures):
                 yield futures[fut], fut.result()

@@ -119,7 +119,7 @@ class BatchSimulator:
         streams = [r.spawn(2) for r in rngs]
         self._rng_wind = [s[0] for s in streams]
         self._rng_sensors = [s[1] for s in streams]
-        self._est = [EstimatorError(pr.estimator, r.spawn(1)[0]) for r in rngs] if pr.estimator.enabled else None
+        self._est = BatchEstimatorError(pr.estimator, [r.spawn(1)[0] for r in rngs]) if pr.estimator.enabled else None
         self._latency_ticks = int(round(pr.setpoint_latency_s * PHYSICS_RATE_HZ))
         tl = pr.setpoint_latency_s if pr.thrust_latency_s is None else pr.thrust_latency_s
         self._thrust_latency_ticks = int(round(tl * PHYSICS_RATE_HZ))
@@ -219,9 +219,7 @@ class BatchSimulator:
                 self._pending_thrust.append((self._ticks + self._thrust_latency_ticks, setpoint))
             self._run_queued(target)
         if self._est is not None:
-            t = self._ticks * PHYSICS_DT_S
-            for e in self._est:
-                e.advance_to(t)
+            self._est.advance_to(self._ticks * PHYSICS_DT_S)
 
     def _run_queued(self, target: int) -> None:
         pending, pending_t = self._pending_sp, self._pending_thrust
@@ -243,7 +241,7 @@ class BatchSimulator:
         """(position (3, N), velocity (3, N)) error of the reported state, NED."""
         if self._est is None:
             return np.zeros((3, self.n)), np.zeros((3, self.n))
-        return (np.array([e.position_error_ned_m for e in self._est]).T, np.array([e.velocity_error_ned_m_s for e in self._est]).T)
+        return self._est.position_error_ned_m, self._est.velocity_error_ned_m_s
 
     # ------------------------------------------------------------------ setpoints
     def _select(self, sp: BatchSetpoint) -> None:
@@ -666,3 +664,79 @@ class BatchSimulator:
         self._rs = (rsx, rsy, rsz, cc)
         self.landed = landed
         self.crashed = crashed
+
+
+class BatchEstimatorError:
+    """:class:`sitl_mock.dynamics.estimator.EstimatorError` for N vehicles sharing one clock and one
+    :class:`EstimatorNoise`: the draws come from each vehicle's own generator, per fusion, in the
+    scalar order (9 normals, then the bias's 3 from its own spawned stream)."""
+
+    def __init__(self, noise: Any, rngs: list[np.random.Generator]) -> None:
+        ref = EstimatorError(noise, np.random.default_rng(0))  # the constants, computed by the scalar code
+        self.noise = noise
+        self.n = n = len(rngs)
+        self._rng = rngs
+        bias_on = noise.velocity_bias_std_xy_m_s > 0.0 or noise.velocity_bias_std_z_m_s > 0.0
+        self._rng_b = [r.spawn(1)[0] for r in rngs] if bias_on else None
+        self._period_s = ref._period_s
+        self._epoch = 0
+        self._phi_v, self._leak, self._gain_p = ref._phi_v, ref._leak, ref._gain_p
+        self._drive = np.array(ref._drive)[:, None]
+        self._white_p = np.array(ref._white_p)[:, None]
+        self._white_v = np.array(ref._white_v)[:, None]
+        self._phi_b = ref._phi_b
+        self._drive_b = np.array(ref._drive_b)[:, None]
+        self._smooth = ref._smooth
+        z = np.zeros((3, n))
+        self._vb, self._vbs, self._wv, self._wvs, self._wp = z.copy(), z.copy(), z.copy(), z.copy(), z.copy()
+        self.position_error_ned_m = z.copy()
+        self.velocity_error_ned_m_s = z.copy()
+        self._tau_out_s = ref._tau_out_s
+        self._fused_p = z.copy()
+        self._out_time_s = 0.0
+
+    def advance_to(self, time_s: float) -> None:
+        if not self.noise.enabled:
+            return
+        due = int(math.floor(time_s / self._period_s + 1e-9))
+        if self._tau_out_s <= 0.0:
+            if due <= self._epoch:
+                return
+            self._fuse(due - self._epoch)
+            self.position_error_ned_m = self._fused_p
+            return
+        while self._epoch < due:
+            self._relax((self._epoch + 1) * self._period_s)
+            self._fuse(1)
+        self._relax(time_s)
+
+    def _relax(self, time_s: float) -> None:
+        dt = time_s - self._out_time_s
+        if dt <= 0.0:
+            return
+        k = math.exp(-dt / self._tau_out_s)
+        p, f = self.position_error_ned_m, self._fused_p
+        self.position_error_ned_m = f + (p - f) * k
+        self._out_time_s = time_s
+
+    def _fuse(self, m: int) -> None:
+        self._epoch += m
+        z = np.stack([r.standard_normal((m, 9)) for r in self._rng], axis=2)  # (m, 9, N)
+        wv, ws, wp = self._wv, self._wvs, self._wp
+        phi, leak, gp, a = self._phi_v, self._leak, self._gain_p, self._smooth
+        drive = self._drive
+        row = z[-1]
+        for row in z:
+            wp = leak * wp + gp * ws
+            wv = phi * wv + drive * row[0:3]
+            ws = a * ws + (1.0 - a) * wv
+        self._wv, self._wvs, self._wp = wv, ws, wp
+        vb, bs = self._vb, self._vbs
+        if self._rng_b is not None:
+            zb = np.stack([r.standard_normal((m, 3)) for r in self._rng_b], axis=2)
+            for rb in zb:
+                vb = self._phi_b * vb + self._drive_b * rb
+                bs = a * bs + (1.0 - a) * vb
+            self._vb, self._vbs = vb, bs
+        self._fused_p = wp + self._white_p * row[3:6]
+        self.velocity_error_ned_m_s = ws + self._white_v * row[6:9] + bs

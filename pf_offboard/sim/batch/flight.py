@@ -23,6 +23,7 @@ import argparse
 import math
 import tempfile
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -113,8 +114,6 @@ def fly(tasks: Sequence[Any]) -> tuple[dict[tuple[int, int], dict[str, Any]], li
 
     Returns (rows by task key, the tasks the scalar engine must fly: flights that left the
     mirrored path)."""
-    from pf_offboard.app.estimator import VELOCITY_CORRECTION_GAP_S, VELOCITY_CORRECTION_MAX_M_S, VELOCITY_RESIDUAL_MAX_M_S
-    from pf_offboard.sim.flight import AUTOPILOT_SYSTEM_ID  # noqa: F401  (the same module's constants)
     from pf_offboard.sweep.runner import finish_row
     from sitl_mock.dynamics.sim import PHYSICS_DT_S
 
@@ -124,6 +123,11 @@ def fly(tasks: Sequence[Any]) -> tuple[dict[tuple[int, int], dict[str, Any]], li
         raise ValueError(f"the batch engine does not fly {why}")
     s = setup.settings
     n = len(tasks)
+    texts = {t.config_yaml for t in tasks}
+    per_flight = None
+    if len(texts) > 1:  # a gain sweep: the same config but for its gains (group_key)
+        by_text = {text: (setup.follower if text == tasks[0].config_yaml else _Setup(text, s).follower) for text in texts}
+        per_flight = [by_text[t.config_yaml] for t in tasks]
     dt = setup.dt_s
     # ---- spawns, as SimFlight._make_autopilot builds them
     pos, vel, q, w, wind, rngs = [], [], [], [], [], []
@@ -138,19 +142,28 @@ def fly(tasks: Sequence[Any]) -> tuple[dict[tuple[int, int], dict[str, Any]], li
     P, Vv, Q, W = np.array(pos).T, np.array(vel).T, np.array(q).T, np.array(w).T
     sim = BatchSimulator(setup.vehicle, rngs, P, Vv, Q, W, wind_ned_m_s=np.array(wind).T)
     # the OFFBOARD entry at the first step: hold the stopping point (estimate = truth at t = 0)
-    speed = np.sqrt(Vv[0] ** 2 + Vv[1] ** 2 + Vv[2] ** 2)
     speed = np.array([float(np.linalg.norm(Vv[:, i])) for i in range(n)])
     hold = P + Vv * speed / (2.0 * 3.0)
     qn = Q / np.sqrt(np.sum(Q * Q, axis=0))
     hold_yaw = np.array([math.atan2(2.0 * (a * d + b * c), 1.0 - 2.0 * (c * c + d * d)) for a, b, c, d in qn.T.tolist()])
-    follower = BatchFollower(setup.follower, n)
+    follower = BatchFollower(setup.follower, n, per_flight)
+    duration = s.duration_s
+    max_steps = int(math.ceil(duration / dt)) + 1
+    with np.errstate(all="ignore"):
+        return _loop(tasks, setup, sim, follower, hold, hold_yaw, n, dt, max_steps, finish_row)
+
+
+def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: BatchFollower, hold: Arr, hold_yaw: Arr, n: int,
+          dt: float, max_steps: int, finish_row: Any) -> tuple[dict[tuple[int, int], dict[str, Any]], list[Any]]:  # fmt: skip
+    from pf_offboard.app.estimator import VELOCITY_CORRECTION_GAP_S, VELOCITY_CORRECTION_MAX_M_S, VELOCITY_RESIDUAL_MAX_M_S
+
+    s = setup.settings
     timed = follower.compensator is not None
     profiled = follower.profile is not None
     speed_ref = float(setup.follower.speed)
     tau = setup.flight.velocity_correction_s
     bias = np.zeros((3, n))
     prev: tuple[float, Arr, Arr] | None = None
-    # ---- the judge (runner._Judge) and the summary's whole-flight maximum, as arrays
     nan = math.nan
     tube, stay = s.tube_m, s.stay_m
     tol = s.speed_tol_m_s if s.speed_tol_m_s is not None else math.inf
@@ -170,7 +183,6 @@ def fly(tasks: Sequence[Any]) -> tuple[dict[tuple[int, int], dict[str, Any]], li
     end_t = np.zeros(n)
     crashed_end = np.zeros(n, dtype=bool)
     duration = s.duration_s
-    max_steps = int(math.ceil(duration / dt)) + 1
     ident = np.tile([[1.0], [0.0], [0.0], [0.0]], n)
     zeros3 = np.zeros((3, n))
     false = np.zeros(n, dtype=bool)
@@ -293,3 +305,60 @@ def fly(tasks: Sequence[Any]) -> tuple[dict[tuple[int, int], dict[str, Any]], li
                                     float(ct_max[k]) if ct_any[k] else None, opt(act), opt(conv), opt(first), opt(last_out),
                                     float(max_out[k]), float(max_after[k]), rms)  # fmt: skip
     return rows, redo
+
+
+# ---------------------------------------------------------------------------------- chunks
+MAX_CHUNK = 2000  # flights stepped together in one process (memory ~ a few MB per 1000)
+MIN_CHUNK = 50  # below this the per-step overhead of the arrays dominates
+
+
+def group_key(task: Any) -> tuple[Any, str]:
+    """Tasks with equal keys fly in one batch: the same settings and the same config but for its
+    gains (a gain sweep's candidates share everything else)."""
+    import yaml
+
+    data = yaml.safe_load(task.config_yaml)
+    if isinstance(data, dict):
+        data.pop("gains", None)
+    return (task.settings, yaml.safe_dump(data, sort_keys=True))
+
+
+@dataclass(frozen=True)
+class BatchChunk:
+    """Flights the batch engine flies together (picklable: a process pool or a Dask worker runs it)."""
+
+    key: tuple[int, int]
+    tasks: tuple[Any, ...]
+
+
+def plan_chunks(tasks: Sequence[Any], parts: int) -> tuple[list[BatchChunk], list[Any]]:
+    """(chunks for the batch engine, tasks for the scalar one). Each group is split into about
+    ``parts`` chunks (at least MIN_CHUNK flights each, at most MAX_CHUNK)."""
+    groups: dict[tuple[Any, str], list[Any]] = {}
+    scalar: list[Any] = []
+    verdicts: dict[tuple[str, Any, bool], str | None] = {}
+    for t in tasks:
+        vk = (t.config_yaml, t.settings, t.logs_dir is not None)
+        if vk not in verdicts:
+            verdicts[vk] = supported(t)
+        if verdicts[vk] is not None:
+            scalar.append(t)
+        else:
+            groups.setdefault(group_key(t), []).append(t)
+    chunks: list[BatchChunk] = []
+    for members in groups.values():
+        size = min(MAX_CHUNK, max(MIN_CHUNK, -(-len(members) // max(parts, 1))))
+        for lo in range(0, len(members), size):
+            part = tuple(members[lo : lo + size])
+            chunks.append(BatchChunk((len(chunks), 0), part))
+    return chunks, scalar
+
+
+def run_chunk(chunk: BatchChunk) -> dict[str, Any]:
+    """Fly a chunk: ``{"rows": [(task key, row), ...], "redo": [tasks for the scalar engine]}``.
+    A chunk that fails as a whole hands all its flights to the scalar engine."""
+    try:
+        rows, redo = fly(chunk.tasks)
+    except Exception:  # never lose flights: the scalar engine flies them (and reports its errors)
+        return {"rows": [], "redo": list(chunk.tasks)}
+    return {"rows": list(rows.items()), "redo": redo}

@@ -335,7 +335,7 @@ class BatchFollower:
     yaw, speed profile, compensator), stepped together: :meth:`update` takes positions and
     velocities of shape (N, 3) and returns a :class:`BatchCommand`."""
 
-    def __init__(self, follower: Any, n: int) -> None:
+    def __init__(self, follower: Any, n: int, per_flight: list[Any] | None = None) -> None:
         if follower.feedforward != "on_path":
             raise NotImplementedError("the batch engine mirrors feedforward: on_path only (any_state: use --engine scalar)")
         self.scalar = follower
@@ -343,7 +343,8 @@ class BatchFollower:
         self.path = follower.path
         self.bpath = BatchPath(follower.path)
         self.projector = BatchProjector(follower.path, n, self.bpath)
-        self.law = BatchLaw(follower.gains, follower.limits)
+        # per_flight: one scalar follower per row that differs from ``follower`` in its gains only
+        self.law = BatchLaw(follower.gains, follower.limits, None if per_flight is None else [f.law for f in per_flight])
         self.speed = follower.speed
         self.profile = _Profile(follower.profile) if follower.profile is not None else None
         self.compensator = _Compensator(follower.compensator, n) if follower.compensator is not None else None

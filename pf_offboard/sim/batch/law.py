@@ -235,28 +235,38 @@ class LawOut(NamedTuple):
 
 
 class BatchLaw:
-    """:class:`pf_offboard.control.law.ControlLaw` on arrays; its constants are the scalar law's."""
+    """:class:`pf_offboard.control.law.ControlLaw` on arrays; its constants are the scalar law's.
 
-    def __init__(self, gains: Gains, limits: Limits) -> None:
+    ``per_flight``: one scalar law per row (a gain sweep: the gains differ, the limits do not);
+    the gain-dependent constants are then arrays."""
+
+    def __init__(self, gains: Gains, limits: Limits, per_flight: list[ControlLaw] | None = None) -> None:
         self.scalar = law = ControlLaw(gains, limits)
-        self.kp, self.kd, self.k_pos = law.kp, law.kd, law.k_pos
-        self.kd_t, self.k_pos_t = law.kd_t, law.k_pos_t
         self.thrust_set = BatchThrustSet(law.thrust_set)
         self.u_max, self.a_dec, self.v_app = law.u_max, law.a_dec, law.v_app
-        self.jerk, self.dv_lin, self.dv_lin_t = law.jerk, law.dv_lin, law.dv_lin_t
-        self.u_t_max, self.c_cbrt = law.u_t_max, law.c_cbrt
+        self.jerk, self.u_t_max = law.jerk, law.u_t_max
+        names = ("kp", "kd", "k_pos", "kd_t", "k_pos_t", "dv_lin", "dv_lin_t", "c_cbrt")
+        if per_flight is None:
+            for name in names:
+                setattr(self, name, getattr(law, name))
+        else:
+            for other in per_flight:
+                for name in ("u_max", "a_dec", "v_app", "jerk", "u_t_max"):
+                    if getattr(other, name) != getattr(law, name):
+                        raise ValueError(f"BatchLaw: per-flight laws must share their limits ({name} differs)")
+            for name in names:
+                setattr(self, name, np.array([getattr(other, name) for other in per_flight], dtype=float))
 
     def shape(self, k: float, dv_lin: float, dv: Arr) -> Arr:
-        with np.errstate(invalid="ignore"):
-            return np.where(dv <= dv_lin, k * dv, np.sqrt(2.0 * self.jerk * np.maximum(dv - 0.5 * dv_lin, 0.0)))
+        return np.where(dv <= dv_lin, k * dv, np.sqrt(2.0 * self.jerk * np.maximum(dv - 0.5 * dv_lin, 0.0)))
 
     def approach_speed(self, dist_m: Arr) -> tuple[Arr, Mask]:
         lin = self.k_pos * dist_m
         brake = np.sqrt(2.0 * self.a_dec * dist_m)
         v = np.where(lin < brake, lin, brake)
-        if self.c_cbrt < _INF:
+        if np.any(np.asarray(self.c_cbrt) < _INF):
             jerk = self.c_cbrt * power(dist_m, 2.0 / 3.0)
-            v = np.where(jerk < v, jerk, v)
+            v = np.where((jerk < v) & (np.asarray(self.c_cbrt) < _INF), jerk, v)
         limited = self.v_app < v
         return np.where(limited, self.v_app, v), limited
 

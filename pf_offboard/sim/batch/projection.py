@@ -71,8 +71,7 @@ class BatchProjector:
             sp2 = ax * ax + ay * ay + az * az
             hess = sp2 + s[6][act] * qx0 + s[7][act] * qy0 + s[8][act] * qz0
             newton = hess > 0.1 * sp2
-            with np.errstate(divide="ignore", invalid="ignore"):
-                new = np.where(newton, l0 - g / hess, l0 - g / sp2)
+            new = np.where(newton, l0 - g / hess, l0 - g / sp2)
             lo_a, hi_a = lo[act], hi[act]
             new = np.where(new < lo_a, lo_a, np.where(new > hi_a, hi_a, new))
             step = new - l0
@@ -125,6 +124,10 @@ class BatchProjector:
     # ------------------------------------------------------------------ public
     def update(self, x: Arr, y: Arr, z: Arr) -> Arr:
         """``Projector.update`` for every flight: lambda* of positions (x, y, z) (ENU, m)."""
+        with np.errstate(all="ignore"):
+            return self._update(x, y, z)
+
+    def _update(self, x: Arr, y: Arr, z: Arr) -> Arr:
         n = self.n
         lx, ly, lz = self._y
         jump = (x - lx) ** 2 + (y - ly) ** 2 + (z - lz) ** 2 > self.jump_m * self.jump_m
