@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     summary = {**stats, "wall_time_s": result.wall_s, "executor": result.executor, "engine": args.engine, "workers": args.workers,
                "cpu_count": os.cpu_count(), "load_average_at_end": list(os.getloadavg()), "config": args.config,
                "settings": plan.settings_dict(spec)}  # fmt: skip
-    print(f"pf-offboard sweep: {len(result.rows)} flights in {result.wall_s:.1f} s ({result.executor})")
+    print(f"pf-offboard sweep: {len(result.rows)} flights in {result.wall_s:.1f} s ({args.engine} engine, {result.executor})")
     for line in report.lines(stats):
         print("  " + line)
     if spec.gains:

@@ -96,7 +96,6 @@ def run(config_path: str | Path, spec: SweepSpec, workers: int = 1, cluster: str
     wall = time.perf_counter() - t0
     executor = (f"dask {cluster}" if cluster else "dask client") if (cluster or client is not None) else (
         "serial" if workers == 1 else f"process pool ({workers} workers)")  # fmt: skip
-    executor = f"{engine} engine, {executor}"
     return SweepResult(rows, wall, executor)
 
 

@@ -20,7 +20,7 @@ def test_a_tiny_sweep_writes_table_summary_and_plot(tmp_path: Path, capsys: pyte
     out, err = capsys.readouterr()
     assert "2 flights in" in out and "convergence time" in out and "2/2" in err
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["flights"] == 2 and summary["executor"] == "serial" and summary["settings"]["ranges"]["max_speed_m_s"] == 1.0
+    assert summary["flights"] == 2 and summary["executor"] == "serial" and summary["engine"] == "batch" and summary["settings"]["ranges"]["max_speed_m_s"] == 1.0
     assert (tmp_path / "flights.csv").read_text().count("\n") == 3
     assert (tmp_path / "roa.png").exists() and not (tmp_path / "flights").exists()
 

@@ -207,6 +207,12 @@ class BatchSimulator:
 
     def advance(self, dt_s: float, setpoint: BatchSetpoint) -> None:
         """``Simulator.advance`` for every vehicle."""
+        if np.any(setpoint.kind == ATTITUDE):  # AttitudeSetpoint normalises its quaternion
+            q = setpoint.q_ned_frd
+            qn = q / np.sqrt(((q[0] * q[0] + q[1] * q[1]) + q[2] * q[2]) + q[3] * q[3])
+            setpoint = BatchSetpoint(setpoint.kind, setpoint.accel_ned_m_s2, setpoint.yaw_rad, setpoint.yaw_rate_rad_s,
+                                     np.where(setpoint.kind == ATTITUDE, qn, q), setpoint.thrust_norm, setpoint.rates_frd_rad_s,
+                                     setpoint.has_ff, setpoint.position_ned_m, setpoint.velocity_ned_m_s)  # fmt: skip
         self._t_req_s += dt_s
         target = int(round(self._t_req_s * PHYSICS_RATE_HZ))
         if self._latency_ticks == 0 and not self._split_thrust:
