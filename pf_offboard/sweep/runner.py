@@ -134,13 +134,13 @@ class _Judge:
         return self.summary.result()
 
 
-def run_flight(task: FlightTask) -> dict[str, Any]:
-    """Fly one task in process (no logs unless ``task.logs_dir``) and return its table row."""
-    from pf_offboard.sim.flight import SimFlight, SimSpec
+def sim_spec(task: FlightTask) -> Any:
+    """The :class:`pf_offboard.sim.SimSpec` a task flies."""
+    from pf_offboard.sim.flight import SimSpec
 
     st, s = task.start, task.settings
     name = f"flight-{st.index:06d}" + (f"-gains-{task.gains.id:03d}" if task.gains is not None else "")
-    spec = SimSpec(
+    return SimSpec(
         throw_enu=st.position_enu_m + st.velocity_enu_m_s,
         throw_q_enu_flu=st.q_enu_flu,
         throw_body_rates_flu_rad_s=st.body_rates_flu_rad_s,
@@ -155,6 +155,15 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
         epoch_unix_s=EPOCH_UNIX_S,
         name=name,
     )
+
+
+def run_flight(task: FlightTask) -> dict[str, Any]:
+    """Fly one task in process (no logs unless ``task.logs_dir``) and return its table row."""
+    from pf_offboard.sim.flight import SimFlight
+
+    st, s = task.start, task.settings
+    spec = sim_spec(task)
+    name = spec.name
     row: dict[str, Any] = task.gains.columns() if task.gains is not None else {}
     row.update(st.columns())
     with tempfile.TemporaryDirectory(prefix="pf-sweep-") as tmp:

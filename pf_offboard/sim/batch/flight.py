@@ -109,11 +109,11 @@ def _wrap_pi(a: Arr) -> Arr:
     return np.where(r <= 0.0, r + 2.0 * math.pi, r) - math.pi
 
 
-def fly(tasks: Sequence[Any]) -> tuple[dict[tuple[int, int], dict[str, Any]], list[Any]]:
-    """Fly tasks that share their config text and settings, all at once.
+def fly(tasks: Sequence[Any], trace: list[Arr] | None = None) -> tuple[dict[tuple[int, int], dict[str, Any]], list[Any]]:
+    """Fly tasks that share their settings and their config but for its gains, all at once.
 
     Returns (rows by task key, the tasks the scalar engine must fly: flights that left the
-    mirrored path)."""
+    mirrored path). ``trace``: gets the true positions (3, N) NED after every step."""
     from pf_offboard.sweep.runner import finish_row
     from sitl_mock.dynamics.sim import PHYSICS_DT_S
 
@@ -150,11 +150,11 @@ def fly(tasks: Sequence[Any]) -> tuple[dict[tuple[int, int], dict[str, Any]], li
     duration = s.duration_s
     max_steps = int(math.ceil(duration / dt)) + 1
     with np.errstate(all="ignore"):
-        return _loop(tasks, setup, sim, follower, hold, hold_yaw, n, dt, max_steps, finish_row)
+        return _loop(tasks, setup, sim, follower, hold, hold_yaw, n, dt, max_steps, finish_row, trace)
 
 
 def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: BatchFollower, hold: Arr, hold_yaw: Arr, n: int,
-          dt: float, max_steps: int, finish_row: Any) -> tuple[dict[tuple[int, int], dict[str, Any]], list[Any]]:  # fmt: skip
+          dt: float, max_steps: int, finish_row: Any, trace: list[Arr] | None) -> tuple[dict[tuple[int, int], dict[str, Any]], list[Any]]:  # fmt: skip
     from pf_offboard.app.estimator import VELOCITY_CORRECTION_GAP_S, VELOCITY_CORRECTION_MAX_M_S, VELOCITY_RESIDUAL_MAX_M_S
 
     s = setup.settings
@@ -283,8 +283,8 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
             yaw_rate_ned = _f32(-cmd.yaw_rate)
             sp = BatchSetpoint(np.full(n, ACCEL, dtype=np.int64), acc_ned, yaw_ned, yaw_rate_ned, ident, np.zeros(n), zeros3, false)
         sim.advance(dt, sp)
-        if sim.crashed.any():  # the mock disarms on a crash (the flight ends at the next check)
-            pass
+        if trace is not None:
+            trace.append(np.array((sim.px, sim.py, sim.pz)))
     else:
         for k in np.flatnonzero(alive).tolist():
             reason[k] = f"time limit {max_steps * dt:.0f} s reached"
