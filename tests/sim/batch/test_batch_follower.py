@@ -8,6 +8,8 @@ allocation, open paths past both ends and the self-intersecting px4-sih loop.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -33,8 +35,9 @@ def test_every_output_equals_the_scalar_follower(name: str) -> None:
     cfg = load_config(CONFIGS / f"{name}.yaml")
     n, steps, dt = 16, 50, 0.01
     rng = np.random.default_rng(11)
-    scalar = [PathFollower.from_config(cfg) for _ in range(n)]
-    batch = BatchFollower(PathFollower.from_config(cfg), n)
+    proto = PathFollower.from_config(cfg)
+    scalar = [copy.deepcopy(proto) for _ in range(n)]
+    batch = BatchFollower(copy.deepcopy(proto), n)
     pos, vel = _states(scalar[0].path, n, rng)
     timed = scalar[0].compensator is not None
     worst: dict[str, float] = {}
