@@ -225,6 +225,40 @@ class BatchThrustSet:
 
 
 # ---------------------------------------------------------------------------------- the law
+BISECT_BITS = 4  # bits of the allocation's bisection decided per pass (2^4 - 1 candidates at once)
+
+
+def _bisect(ts: BatchThrustSet, coast: Mask, b: V, t: V, m1: V, steps: int) -> Arr:
+    """The scalar allocation's bisection (``lo`` after ``steps`` halvings of [0, 1]) for every row.
+
+    The scalar law halves sequentially; here BISECT_BITS bits are decided per pass by testing all
+    the dyadic points of the pass at once. Feasibility along the scaling is an interval containing
+    0 (the thrust set is convex), so the largest feasible point of each pass is the one the
+    sequential halving reaches: the same dyadic ``lo``, computed from the same products."""
+    n = len(coast)
+    lo = np.zeros(n)
+    done = 0
+    while done < steps:
+        bits = min(BISECT_BITS, steps - done)
+        k = (1 << bits) - 1
+        h = 0.5 ** (done + bits)  # the spacing of this pass's points (exact: a power of two)
+        j = np.arange(1, k + 1, dtype=float)
+        mid = (lo[:, None] + j[None, :] * h).ravel()  # (n * k,) row-major: row r's points together
+        rep = lambda a: np.repeat(a, k)  # noqa: E731
+        c = rep(coast)
+        bx, by, bz = rep(b[0]), rep(b[1]), rep(b[2])
+        f = _where3(c, (mid * bx, mid * by, mid * bz + G),
+                    (bx + mid * rep(t[0]), by + mid * rep(t[1]), bz + mid * rep(t[2]) + G))  # fmt: skip
+        ok = ~ts.line_interval(f, (rep(m1[0]), rep(m1[1]), rep(m1[2])))[2]
+        ok = ok.reshape(n, k)
+        # the sequential halving moves lo up to the largest feasible point it visits: with a monotone
+        # predicate, the number of feasible points of the pass from its start
+        first_bad = np.where(ok.all(axis=1), k, np.argmin(ok, axis=1))
+        lo = lo + first_bad * h
+        done += bits
+    return lo
+
+
 class LawOut(NamedTuple):
     """:class:`pf_offboard.control.law.LawOutput` for N states."""
 
@@ -334,15 +368,7 @@ class BatchLaw:
             t_ = (tx[idx], ty[idx], tz[idx])
             n1 = (m1[0][idx], m1[1][idx], m1[2][idx])
             coast = ts.line_interval((b_[0], b_[1], b_[2] + G), n1)[2]
-            lo = np.zeros(len(idx))
-            hi = np.ones(len(idx))
-            for _ in range(bisection_steps):
-                mid = 0.5 * (lo + hi)
-                f = _where3(coast, (mid * b_[0], mid * b_[1], mid * b_[2] + G),
-                            (b_[0] + mid * t_[0], b_[1] + mid * t_[1], b_[2] + mid * t_[2] + G))  # fmt: skip
-                e = ts.line_interval(f, n1)[2]
-                hi = np.where(e, mid, hi)
-                lo = np.where(e, lo, mid)
+            lo = _bisect(ts, coast, b_, t_, n1, bisection_steps)
             bxi = np.where(coast, lo * b_[0], b_[0])
             byi = np.where(coast, lo * b_[1], b_[1])
             bzi = np.where(coast, lo * b_[2], b_[2])
