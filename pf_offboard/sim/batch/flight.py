@@ -125,9 +125,15 @@ def fly(tasks: Sequence[Any], trace: list[Arr] | None = None) -> tuple[dict[tupl
     n = len(tasks)
     texts = {t.config_yaml for t in tasks}
     per_flight = None
-    if len(texts) > 1:  # a gain sweep: the same config but for its gains (group_key)
-        by_text = {text: (setup.follower if text == tasks[0].config_yaml else _Setup(text, s).follower) for text in texts}
-        per_flight = [by_text[t.config_yaml] for t in tasks]
+    if len(texts) > 1:  # a gain sweep: the same config but for its gains (group_key): one law each
+        from pf_offboard.config import parse_config_bytes
+        from pf_offboard.control.law import ControlLaw
+
+        laws = {}
+        for text in texts:
+            cfg = parse_config_bytes(text.encode("utf-8"))
+            laws[text] = ControlLaw(cfg.gains, cfg.limits)
+        per_flight = [laws[t.config_yaml] for t in tasks]
     dt = setup.dt_s
     # ---- spawns, as SimFlight._make_autopilot builds them
     pos, vel, q, w, wind, rngs = [], [], [], [], [], []
@@ -336,15 +342,19 @@ def plan_chunks(tasks: Sequence[Any], parts: int) -> tuple[list[BatchChunk], lis
     ``parts`` chunks (at least MIN_CHUNK flights each, at most MAX_CHUNK)."""
     groups: dict[tuple[Any, str], list[Any]] = {}
     scalar: list[Any] = []
-    verdicts: dict[tuple[str, Any, bool], str | None] = {}
+    verdicts: dict[tuple[Any, str, bool], str | None] = {}
+    keys: dict[str, str] = {}  # config text -> the text without its gains
     for t in tasks:
-        vk = (t.config_yaml, t.settings, t.logs_dir is not None)
-        if vk not in verdicts:
+        if t.config_yaml not in keys:
+            keys[t.config_yaml] = group_key(t)[1]
+        gk = (t.settings, keys[t.config_yaml])
+        vk = (*gk, t.logs_dir is not None)
+        if vk not in verdicts:  # gains do not change what the batch engine mirrors
             verdicts[vk] = supported(t)
         if verdicts[vk] is not None:
             scalar.append(t)
         else:
-            groups.setdefault(group_key(t), []).append(t)
+            groups.setdefault(gk, []).append(t)
     chunks: list[BatchChunk] = []
     for members in groups.values():
         size = min(MAX_CHUNK, max(MIN_CHUNK, -(-len(members) // max(parts, 1))))

@@ -343,8 +343,9 @@ class BatchFollower:
         self.path = follower.path
         self.bpath = BatchPath(follower.path)
         self.projector = BatchProjector(follower.path, n, self.bpath)
-        # per_flight: one scalar follower per row that differs from ``follower`` in its gains only
-        self.law = BatchLaw(follower.gains, follower.limits, None if per_flight is None else [f.law for f in per_flight])
+        # per_flight: one scalar ControlLaw (or follower) per row, differing from ``follower``'s in its gains only
+        laws = None if per_flight is None else [getattr(f, "law", f) for f in per_flight]
+        self.law = BatchLaw(follower.gains, follower.limits, laws)
         self.speed = follower.speed
         self.profile = _Profile(follower.profile) if follower.profile is not None else None
         self.compensator = _Compensator(follower.compensator, n) if follower.compensator is not None else None
