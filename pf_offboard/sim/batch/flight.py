@@ -247,7 +247,9 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
             sum2 = np.where(out_, 0.0, sum2)
             cnt = np.where(out_, 0, cnt)
             inn = alive & ~out_
-            ref = cmd.eta2_ref_m_s if profiled else speed_ref
+            # the reference the pipeline logs: the law's (profile, start ramp) when the scalar
+            # follower ramps, else the profile's or the constant speed
+            ref = cmd.eta2_ref_m_s if (profiled or follower._ramp is not None) else speed_ref
             start = inn & np.isnan(conv) & (ct <= tube) & (np.abs(cmd.eta2 - ref) <= tol)
             conv = np.where(start, tt, conv)
             first = np.where(start & np.isnan(first), tt, first)

@@ -330,6 +330,50 @@ class _Compensator:
             sent.pop(0)
 
 
+class _StartRamp:
+    """The scalar follower's start ramp (``PathFollower._ramp``, when the scalar follower has one)
+    for N flights: the reference speed rises as ``sqrt(v0^2 + 2 a s)`` over the distance ``s``
+    travelled along the path since activation, until it reaches the reference (then done)."""
+
+    def __init__(self, ramp: Any, n: int) -> None:
+        self.accel = ramp.accel
+        self.lap = ramp.lap
+        self.sign = ramp.sign
+        self.n = n
+        self.reset()
+
+    def reset(self) -> None:
+        n = self.n
+        self.done = np.full(n, self.accel is None)
+        self._eta1 = np.full(n, math.nan)  # NaN: not started (the scalar's None)
+        self._s = np.zeros(n)
+        self._v0 = np.zeros(n)
+
+    def _travelled(self, eta1: Arr) -> Arr:
+        d = eta1 - self._eta1
+        if self.lap is not None:
+            half = 0.5 * self.lap
+            d = np.mod(d + half, self.lap) - half
+        s = self._s + self.sign * d
+        return np.where(s > 0.0, s, 0.0)
+
+    def advance(self, eta1: Arr, speed_along: Arr, rows: Mask) -> None:
+        rows = rows & ~self.done
+        start = rows & np.isnan(self._eta1)
+        v0 = self.sign * speed_along
+        self._v0 = np.where(start, np.where((v0 > 0.0) & np.isfinite(v0), v0, 0.0), self._v0)
+        self._s = np.where(start, 0.0, np.where(rows, self._travelled(eta1), self._s))
+        self._eta1 = np.where(rows, eta1, self._eta1)
+
+    def speed(self, eta1: Arr) -> Arr:
+        """|eta2_ref| the ramp allows (NaN: none — done or not started)."""
+        if self.accel is None:
+            return np.full(self.n, math.nan)
+        on = ~self.done & ~np.isnan(self._eta1)
+        v = np.sqrt(self._v0 * self._v0 + 2.0 * self.accel * self._travelled(eta1))
+        return np.where(on, v, math.nan)
+
+
 class BatchFollower:
     """N copies of a scalar :class:`~pf_offboard.control.PathFollower` (its path, gains, limits,
     yaw, speed profile, compensator), stepped together: :meth:`update` takes positions and
@@ -351,12 +395,16 @@ class BatchFollower:
         self.compensator = _Compensator(follower.compensator, n) if follower.compensator is not None else None
         self._measured_projector = BatchProjector(follower.path, n, self.bpath) if self.compensator is not None else None
         self._yaw = follower._yaw
+        ramp = getattr(follower, "_ramp", None)
+        self._ramp = _StartRamp(ramp, n) if ramp is not None else None
         self._closed = bool(follower.path.closed)
         self._lam_max = float(follower.path.lam_max)
         self._length = float(follower.path.length_m)
 
     def reset(self) -> None:
         self.projector.reset()
+        if self._ramp is not None:
+            self._ramp.reset()
         if self.compensator is not None:
             self.compensator.reset()
             self._measured_projector.reset()  # type: ignore[union-attr]
@@ -406,6 +454,19 @@ class BatchFollower:
                   offsets: tuple[Arr, Arr, Arr] | None) -> tuple[Any, ...]:  # fmt: skip
         """``PathFollower._evaluate``."""
         eta2_ref, deta2, ddeta2 = self.reference(terms.eta1)
+        ff = deta2 * terms.eta2 if self.profile is not None else None
+        cap = None
+        if self._ramp is not None:  # the start ramp: its speed, feed-forward and bound where it is below the reference
+            ff = deta2 * terms.eta2
+            ramp = self._ramp.speed(terms.eta1)
+            on = ~np.isnan(ramp) & (ramp < np.abs(eta2_ref))
+            a = self._ramp.accel if self._ramp.accel is not None else math.inf
+            cap = np.where(on, a, math.inf)
+            fade = np.minimum(1.0, (np.abs(eta2_ref) - ramp) / (a * F.RAMP_END_S))
+            ff = np.where(on, self._ramp.sign * a * fade, ff)
+            eta2_ref = np.where(on, np.copysign(ramp, eta2_ref), eta2_ref)
+            deta2 = np.where(on, 0.0, deta2)
+            ddeta2 = np.where(on, 0.0, ddeta2)
         r = (y[0] - s[0], y[1] - s[1], y[2] - s[2])
         dist = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
         w = _approach_weight(terms.tube, dist)
@@ -425,12 +486,11 @@ class BatchFollower:
             use = w < 1.0
             eta2_ref_law = np.where(use, eta2_ref + b_eta2, eta2_ref)
             terms = terms._replace(xi1=np.where(use, terms.xi1 + b_xi1, terms.xi1), phi1=np.where(use, terms.phi1 + b_phi1, terms.phi1))
-        ff = deta2 * st.eta2 if self.profile is not None else None
-        tube, ok = law.tube(terms, eta2_ref_law, ff)
+        tube, ok = law.tube(terms, eta2_ref_law, ff, tangential_cap=cap)
         has_tube = (w < 1.0) & ok
         w = np.where(has_tube, w, 1.0)
         tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
-        app = law.approach(r, v, tan, np.where(past_end, 0.0, eta2_ref))
+        app = law.approach(r, v, tan, np.where(past_end, 0.0, eta2_ref), cap)
         k = 1.0 - w
         blend = (k * tube.accel[0] + w * app.accel[0], k * tube.accel[1] + w * app.accel[1], k * tube.accel[2] + w * app.accel[2])
         only_app = w >= 1.0  # no tube output (w = 1) or the approach alone
@@ -483,6 +543,15 @@ class BatchFollower:
                 if bad.any():
                     raise FloatingPointError("batch compensator: a non-finite prediction (the scalar one resets here)")
             lam, s, terms = self._terms(y, v)
+            ramp = self._ramp
+            if ramp is not None and not ramp.done.all():
+                d1 = s[3:6]
+                n1 = np.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+                eta1 = terms.eta1
+                rows = ~ramp.done
+                ramp.advance(eta1, (v[0] * d1[0] + v[1] * d1[1] + v[2] * d1[2]) / n1, rows)
+                allowed = ramp.speed(eta1)
+                ramp.done = ramp.done | (rows & ~np.isnan(allowed) & (allowed >= np.abs(self.reference(eta1)[0]) - F.RAMP_DONE_M_S))
             offsets = comp.integral_offsets() if comp is not None else None
             st, eta2_ref, deta2, ddeta2, w, res, tan, s_ss, s_sss, dist = self._evaluate(y, v, lam, s, terms, offsets)
             law = self.law

@@ -278,14 +278,18 @@ class BatchLaw:
         self.scalar = law = ControlLaw(gains, limits)
         self.thrust_set = BatchThrustSet(law.thrust_set)
         self.u_max, self.a_dec, self.v_app = law.u_max, law.a_dec, law.v_app
-        self.jerk, self.u_t_max = law.jerk, law.u_t_max
+        self.jerk = law.jerk
+        # The speed loop's bound: a constant of the law (limits.max_tangential_accel_m_s2), or a
+        # cap the caller passes per step (the follower's start ramp) where the scalar law takes one.
+        self.cap_per_call = not hasattr(law, "u_t_max")
+        self.u_t_max = math.inf if self.cap_per_call else law.u_t_max
         names = ("kp", "kd", "k_pos", "kd_t", "k_pos_t", "dv_lin", "dv_lin_t", "c_cbrt")
         if per_flight is None:
             for name in names:
                 setattr(self, name, getattr(law, name))
         else:
             for other in per_flight:
-                for name in ("u_max", "a_dec", "v_app", "jerk", "u_t_max"):
+                for name in ("u_max", "a_dec", "v_app", "jerk"):
                     if getattr(other, name) != getattr(law, name):
                         raise ValueError(f"BatchLaw: per-flight laws must share their limits ({name} differs)")
             for name in names:
@@ -331,21 +335,22 @@ class BatchLaw:
         k = self.u_max / np.where(red, n, 1.0)
         return np.where(red, ux * k, ux), np.where(red, uy * k, uy), red, limited
 
-    def tangential(self, eta2_ref: Arr, eta2: Arr) -> Arr:
+    def tangential(self, eta2_ref: Arr, eta2: Arr, cap: Arr | float | None = None) -> Arr:
         dv = eta2_ref - eta2
         adv = np.abs(dv)
         u = np.where(adv <= self.dv_lin_t, self.kd_t * dv, np.copysign(self.shape(self.kd_t, self.dv_lin_t, adv), dv))
-        cap = self.u_t_max
+        cap = self.u_t_max if cap is None else cap
         return np.where(u > cap, cap, np.where(u < -cap, -cap, u))
 
     def tube(self, terms: Terms, eta2_ref: Arr, feedforward_m_s2: Arr | None = None,
-             bisection_steps: int = BISECTION_STEPS) -> tuple[LawOut, Mask]:  # fmt: skip
+             bisection_steps: int = BISECTION_STEPS, tangential_cap: Arr | None = None) -> tuple[LawOut, Mask]:  # fmt: skip
         """``ControlLaw.tube``: the output and which rows have one (the scalar's None: ``~ok``)."""
         (m1, m2, m3), ok = inverse_columns(terms.beta1, terms.beta2, terms.beta3)
         al1, al2, al3 = terms.alpha
         u_xi, u_phi, reduced, limited = self.transversal(terms.xi1, terms.xi2, terms.phi1, terms.phi2)
-        u_eta = self.tangential(eta2_ref, terms.eta2)
-        bounded = np.abs(u_eta) >= self.u_t_max
+        cap = self.u_t_max if tangential_cap is None else tangential_cap
+        u_eta = self.tangential(eta2_ref, terms.eta2, cap)
+        bounded = np.abs(u_eta) >= cap
         if feedforward_m_s2 is not None:
             u_eta = np.where(feedforward_m_s2 != 0.0, u_eta + feedforward_m_s2, u_eta)
         bx = -(m1[0] * al1 + m2[0] * al2 + m3[0] * al3)
@@ -401,7 +406,7 @@ class BatchLaw:
             trans = trans | fallback
         return LawOut(a, tang, trans, limited), ok
 
-    def approach(self, r: V, v: V, t: V, eta2_ref: Arr) -> LawOut:
+    def approach(self, r: V, v: V, t: V, eta2_ref: Arr, tangential_cap: Arr | None = None) -> LawOut:
         d = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
         pos = d > 0.0
         speed, limited = self.approach_speed(d)
@@ -421,9 +426,10 @@ class BatchLaw:
         c = self.u_max / np.where(reduced, n, 1.0)
         px, py, pz = np.where(reduced, px * c, px), np.where(reduced, py * c, py), np.where(reduced, pz * c, pz)
         n = np.where(reduced, self.u_max, n)
-        at = self.tangential(eta2_ref, -et)
+        cap = self.u_t_max if tangential_cap is None else tangential_cap
+        at = self.tangential(eta2_ref, -et, cap)
         room = np.sqrt(np.maximum(self.u_max * self.u_max - n * n, 0.0))
-        clipped = np.abs(at) >= self.u_t_max
+        clipped = np.abs(at) >= cap
         hi = at > room
         lo = ~hi & (at < -room)
         at = np.where(hi, room, np.where(lo, -room, at))
