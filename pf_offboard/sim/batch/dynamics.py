@@ -525,12 +525,12 @@ class BatchSimulator:
                 if tick.any():
                     rcount = np.where(tick, rdiv, rcount)
                     ex, ey, ez = rsx - wx, rsy - wy, rsz - wz
-                    nix = np.clip(ix + ex * rdt, -ilx, ilx)
-                    niy = np.clip(iy + ey * rdt, -ily, ily)
-                    niz = np.clip(iz + ez * rdt, -ilz, ilz)
-                    r = np.clip(kpx * ex + kix * nix, -avail, avail)
-                    p = np.clip(kpy * ey + kiy * niy, -avail, avail)
-                    yv = np.clip(kpz * ez + kiz * niz, -avail, avail)
+                    nix = np.minimum(np.maximum(ix + ex * rdt, -ilx), ilx)
+                    niy = np.minimum(np.maximum(iy + ey * rdt, -ily), ily)
+                    niz = np.minimum(np.maximum(iz + ez * rdt, -ilz), ilz)
+                    r = np.minimum(np.maximum(kpx * ex + kix * nix, -avail), avail)
+                    p = np.minimum(np.maximum(kpy * ey + kiy * niy, -avail), avail)
+                    yv = np.minimum(np.maximum(kpz * ez + kiz * niz, -avail), avail)
                     r = ldx * r - kdx * tqx
                     p = ldy * p - kdy * tqy
                     yv = ldz * yv - kdz * tqz
