@@ -79,10 +79,20 @@ class FlightTask:
     settings: FlightSettings
     gains: GainCandidate | None = None
     logs_dir: str | None = None  # write this flight's logs to <logs_dir>/flight-<index> (on the worker)
+    vehicle_index: int | None = None  # a sweep over several vehicles: this one's place (and a vehicle column)
 
     @property
-    def key(self) -> tuple[int, int]:
-        return (self.gains.id if self.gains is not None else -1, self.start.index)
+    def key(self) -> tuple[int, ...]:
+        key = (self.gains.id if self.gains is not None else -1, self.start.index)
+        return key if self.vehicle_index is None else (self.vehicle_index, *key)
+
+    def first_columns(self) -> dict[str, Any]:
+        """The row's leading columns: the vehicle (several vehicles), the gain candidate, the start."""
+        row: dict[str, Any] = {"vehicle": self.settings.vehicle} if self.vehicle_index is not None else {}
+        if self.gains is not None:
+            row.update(self.gains.columns())
+        row.update(self.start.columns())
+        return row
 
 
 class _Judge:
@@ -164,8 +174,7 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
     st, s = task.start, task.settings
     spec = sim_spec(task)
     name = spec.name
-    row: dict[str, Any] = task.gains.columns() if task.gains is not None else {}
-    row.update(st.columns())
+    row = task.first_columns()
     with tempfile.TemporaryDirectory(prefix="pf-sweep-") as tmp:
         config_path = Path(tmp) / "config.yaml"
         config_path.write_text(task.config_yaml, encoding="utf-8")
@@ -350,9 +359,9 @@ def _pool(tasks: Sequence[Any], workers: int, fn: Callable[[Any], Any] | None = 
                 fut.cancel()
 
 
-def _collect(done: Iterable[tuple[tuple[int, int], dict[str, Any]]], total: int,
+def _collect(done: Iterable[tuple[tuple[int, ...], dict[str, Any]]], total: int,
              on_row: Callable[[dict[str, Any]], None] | None) -> list[dict[str, Any]]:  # fmt: skip
-    rows: dict[tuple[int, int], dict[str, Any]] = {}
+    rows: dict[tuple[int, ...], dict[str, Any]] = {}
     for key, row in done:
         rows[key] = row
         if on_row is not None:

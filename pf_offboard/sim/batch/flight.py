@@ -302,8 +302,7 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
         if fallback[k]:
             redo.append(task)
             continue
-        row: dict[str, Any] = task.gains.columns() if task.gains is not None else {}
-        row.update(task.start.columns())
+        row = task.first_columns()
 
         def opt(a: Arr) -> float | None:
             return None if math.isnan(float(a[k])) else float(a[k])
