@@ -10,8 +10,9 @@ mock's OFFBOARD handling (the position hold before the first setpoint, then the 
 setpoints) and its dynamics (:class:`~pf_offboard.sim.batch.dynamics.BatchSimulator`); the
 sweep's judge and the flight summary's figures as arrays. Rows come out as the scalar engine's.
 
-Mirrored: the PX4 profile with ``acceleration`` output, engaged at once (``throw_engage_after_s``
-0, what sweeps fly), constant wind. Anything else — ArduPilot, attitude / rates output, kept logs,
+Mirrored: the PX4 profile with ``acceleration`` or ``attitude`` output, engaged at once
+(``throw_engage_after_s`` 0, what sweeps fly), constant wind. Anything else — ArduPilot, ``rates``
+output (the app's own attitude loop), kept logs,
 the trajectory-tracking baseline, ``any_state`` feed-forward — is flown by the scalar engine
 (:func:`supported` says why); so is any single flight that leaves the mirrored path (a command
 that is not finite, an implausible estimator jump).
@@ -31,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard import frames
-from pf_offboard.sim.batch.dynamics import ACCEL, POSITION, BatchSetpoint, BatchSimulator
+from pf_offboard.sim.batch.dynamics import ACCEL, ATTITUDE, POSITION, BatchSetpoint, BatchSimulator
 from pf_offboard.sim.batch.follower import BatchFollower
 
 Arr = NDArray[np.float64]
@@ -70,13 +71,15 @@ class _Setup:
         self.settings = settings
         tilt_param = 1.0 if self.vehicle.accel_decouple else 0.0  # MPC_ACC_DECOUPLE as the mock reports it
         self.tilt_from_gravity = self.profile.tilts_from_gravity(tilt_param)
+        # the encoder's hover thrust: the config's, else MPC_THR_HOVER as the mock reports it (float32)
+        self.hover_thrust = fs.hover_thrust if fs.hover_thrust is not None else float(np.float32(self.vehicle.hover_thrust))
 
     def unsupported(self, logs: bool) -> str | None:
         if logs:
             return "kept logs"
         if self.settings.autopilot != "px4":
             return f"autopilot {self.settings.autopilot}"
-        if self.flight.output_mode != "acceleration":
+        if self.flight.output_mode not in ("acceleration", "attitude"):
             return f"output {self.flight.output_mode}"
         if not self.is_follower:
             return "the trajectory-tracking controller"
@@ -102,6 +105,49 @@ def _tilt_from_gravity(ax: Arr, ay: Arr, az: Arr) -> tuple[Arr, Arr, Arr]:
 
     scale = 1.0 / (np.maximum(G_M_S2 + az, _TILT_FROM_GRAVITY_FLOOR * G_M_S2) / G_M_S2)
     return ax * scale, ay * scale, az
+
+
+def _norm_rows(q: Arr) -> Arr:
+    """``np.linalg.norm`` of each row, as the scalar code computes it (a BLAS dot: no vectorised
+    sum rounds the same)."""
+    return np.array([float(np.linalg.norm(row)) for row in q])
+
+
+def _attitude_setpoint(setup: _Setup, cmd: Any, n: int) -> BatchSetpoint:
+    """``attitude`` output: the encoder's SET_ATTITUDE_TARGET (NED/FRD quaternion, the body rates
+    the profile honours, normalised thrust; float32 on the wire) and the mock's PX4 handling of it
+    (``px4_attitude_target``: the quaternion normalised, the yaw rate as feed-forward)."""
+    from pf_offboard.app.encoders import G_M_S2
+
+    # frames.quat_enu_flu_to_ned_frd: two fixed half-turns, then _canonical (norm, w >= 0)
+    a = np.asarray(frames._Q_NED_FROM_ENU, dtype=float)
+    b = np.asarray(frames._Q_FLU_FROM_FRD, dtype=float)
+    q = cmd.attitude.T
+    w0, x0, y0, z0 = a
+    w1, x1, y1, z1 = q
+    m = np.array((w0 * w1 - x0 * x1 - y0 * y1 - z0 * z1, w0 * x1 + x0 * w1 + y0 * z1 - z0 * y1,
+                  w0 * y1 - x0 * z1 + y0 * w1 + z0 * x1, w0 * z1 + x0 * y1 - y0 * x1 + z0 * w1))  # fmt: skip
+    w0, x0, y0, z0 = m
+    w1, x1, y1, z1 = b
+    m = np.array((w0 * w1 - x0 * x1 - y0 * y1 - z0 * z1, w0 * x1 + x0 * w1 + y0 * z1 - z0 * y1,
+                  w0 * y1 - x0 * z1 + y0 * w1 + z0 * x1, w0 * z1 + x0 * y1 - y0 * x1 + z0 * w1))  # fmt: skip
+    m = m / _norm_rows(m.T)
+    m = np.where(m[0] < 0.0, -m, m)
+    q_wire = _f32(m)
+    # body rates FLU -> FRD; PX4 honours the yaw rate only (profile.attitude_rates_ff)
+    rates = np.array((cmd.body_rates[:, 0], -cmd.body_rates[:, 1], -cmd.body_rates[:, 2]))
+    used = setup.profile.attitude_rates_ff
+    sent = _f32(np.array([rates[i] if used[i] else np.zeros(n) for i in range(3)]))
+    thrust = cmd.thrust / G_M_S2 * setup.hover_thrust
+    thrust = _f32(np.minimum(1.0, np.maximum(0.0, thrust)))
+    # the mock: thrust clipped, the quaternion normalised, the yaw rate as feed-forward when not 0
+    thrust = np.minimum(np.maximum(thrust, 0.0), 1.0)
+    qn = q_wire / _norm_rows(q_wire.T)
+    yaw_rate = sent[2] if used[2] else np.zeros(n)
+    has_ff = yaw_rate != 0.0
+    ff = np.array((np.zeros(n), np.zeros(n), yaw_rate))
+    return BatchSetpoint(np.full(n, ATTITUDE, dtype=np.int64), np.zeros((3, n)), np.full(n, math.nan), np.zeros(n), qn, thrust, ff,
+                         has_ff)  # fmt: skip
 
 
 def _wrap_pi(a: Arr) -> Arr:
@@ -281,6 +327,8 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
         if i == 0:  # no setpoint taken yet: the position hold at the stopping point
             sp = BatchSetpoint(np.full(n, POSITION, dtype=np.int64), zeros3, hold_yaw, np.zeros(n), ident, np.zeros(n), zeros3, false,
                                hold, zeros3)  # fmt: skip
+        elif setup.flight.output_mode == "attitude":
+            sp = _attitude_setpoint(setup, cmd, n)
         else:
             a = cmd.acceleration
             ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
