@@ -10,9 +10,9 @@ mock's OFFBOARD handling (the position hold before the first setpoint, then the 
 setpoints) and its dynamics (:class:`~pf_offboard.sim.batch.dynamics.BatchSimulator`); the
 sweep's judge and the flight summary's figures as arrays. Rows come out as the scalar engine's.
 
-Mirrored: the PX4 profile with ``acceleration`` or ``attitude`` output, engaged at once
-(``throw_engage_after_s`` 0, what sweeps fly), constant wind. Anything else — ArduPilot, ``rates``
-output (the app's own attitude loop), kept logs,
+Mirrored: the PX4 profile in every output mode (``rates``: the app's attitude loop per flight with
+the scalar functions), engaged at once (``throw_engage_after_s`` 0, what sweeps fly), constant
+wind. Anything else — ArduPilot, kept logs,
 the trajectory-tracking baseline, ``any_state`` feed-forward — is flown by the scalar engine
 (:func:`supported` says why); so is any single flight that leaves the mirrored path (a command
 that is not finite, an implausible estimator jump).
@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard import frames
-from pf_offboard.sim.batch.dynamics import ACCEL, ATTITUDE, POSITION, BatchSetpoint, BatchSimulator
+from pf_offboard.sim.batch.dynamics import ACCEL, ATTITUDE, POSITION, RATES, BatchSetpoint, BatchSimulator
 from pf_offboard.sim.batch.follower import BatchFollower
 
 Arr = NDArray[np.float64]
@@ -79,7 +79,7 @@ class _Setup:
             return "kept logs"
         if self.settings.autopilot != "px4":
             return f"autopilot {self.settings.autopilot}"
-        if self.flight.output_mode not in ("acceleration", "attitude"):
+        if self.flight.output_mode not in ("acceleration", "attitude", "rates"):
             return f"output {self.flight.output_mode}"
         if not self.is_follower:
             return "the trajectory-tracking controller"
@@ -148,6 +148,45 @@ def _attitude_setpoint(setup: _Setup, cmd: Any, n: int) -> BatchSetpoint:
     ff = np.array((np.zeros(n), np.zeros(n), yaw_rate))
     return BatchSetpoint(np.full(n, ATTITUDE, dtype=np.int64), np.zeros((3, n)), np.full(n, math.nan), np.zeros(n), qn, thrust, ff,
                          has_ff)  # fmt: skip
+
+
+def _estimated_attitude(q_ned_frd: Arr) -> list[Any]:
+    """The app's estimator's attitude per flight (its own functions, row by row: exact)."""
+    from pf_offboard.app.estimator import _unit_quat
+
+    out = []
+    for row in q_ned_frd.T:
+        q = _unit_quat(row)
+        out.append(None if q is None else frames.quat_ned_frd_to_enu_flu(q))
+    return out
+
+
+def _rates_setpoint(setup: _Setup, cmd: Any, n: int, q_est: list[Any]) -> BatchSetpoint:
+    """``rates`` output: the encoder's own attitude loop (:class:`AttitudeRateLaw`, per flight with
+    the scalar functions: it is stateless and exact), the thrust along the current body z, float32
+    on the wire; the mock's PX4 handling (a rate setpoint)."""
+    from pf_offboard.app.encoders import _THRUST_PROJECTION_FLOOR, body_z, thrust_normalised
+    from pf_offboard.control.attitude import AttitudeRateLaw
+
+    law = setup.rate_law if hasattr(setup, "rate_law") else AttitudeRateLaw(setup.flight.attitude_time_constant_s)
+    setup.rate_law = law  # type: ignore[attr-defined]
+    rates = np.zeros((3, n))
+    thrust = np.zeros(n)
+    for i in range(n):
+        q = q_est[i]
+        if q is None:  # never in a mirrored flight: the scalar encoder would hold
+            raise FloatingPointError("no attitude estimate")
+        q_des = cmd.attitude[i]
+        r = law.update(q_des, q, cmd.body_rates[i])
+        projection = float(np.dot(body_z(q_des), body_z(q)))
+        thrust[i] = thrust_normalised(float(cmd.thrust[i]) * max(projection, _THRUST_PROJECTION_FLOOR), setup.hover_thrust)
+        frd = frames.flu_to_frd(r)
+        rates[:, i] = (float(frd[0]), float(frd[1]), float(frd[2]))
+    rates = _f32(rates)
+    thrust = np.minimum(np.maximum(_f32(thrust), 0.0), 1.0)
+    ident = np.tile([[1.0], [0.0], [0.0], [0.0]], n)
+    return BatchSetpoint(np.full(n, RATES, dtype=np.int64), np.zeros((3, n)), np.full(n, math.nan), np.zeros(n), ident, thrust, rates,
+                         np.zeros(n, dtype=bool))  # fmt: skip
 
 
 def _wrap_pi(a: Arr) -> Arr:
@@ -238,6 +277,7 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
     ident = np.tile([[1.0], [0.0], [0.0], [0.0]], n)
     zeros3 = np.zeros((3, n))
     false = np.zeros(n, dtype=bool)
+    q_est: list[Any] = []
     for i in range(max_steps):
         t_ap = sim.time_s
         # ---- telemetry: LOCAL_POSITION_NED (truth + estimator error, float32, whole ms)
@@ -267,6 +307,8 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
         else:
             v_used = v_ned
         prev = (t_est, p_ned, v_ned)
+        if setup.flight.output_mode == "rates":  # ATTITUDE_QUATERNION (truth, float32) -> the estimator's q (FLU -> ENU)
+            q_est = _estimated_attitude(_f32(np.array((sim.qw, sim.qx, sim.qy, sim.qz))))
         y_enu = np.stack((p_ned[1], p_ned[0], -p_ned[2]), axis=1)
         v_enu = np.stack((v_used[1], v_used[0], -v_used[2]), axis=1)
         # ---- the pipeline: active from the second sample on (the first is the engage step)
@@ -329,6 +371,8 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
                                hold, zeros3)  # fmt: skip
         elif setup.flight.output_mode == "attitude":
             sp = _attitude_setpoint(setup, cmd, n)
+        elif setup.flight.output_mode == "rates":
+            sp = _rates_setpoint(setup, cmd, n, q_est)
         else:
             a = cmd.acceleration
             ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
