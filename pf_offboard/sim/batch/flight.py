@@ -200,7 +200,6 @@ def fly(tasks: Sequence[Any], trace: list[Arr] | None = None) -> tuple[dict[tupl
     Returns (rows by task key, the tasks the scalar engine must fly: flights that left the
     mirrored path). ``trace``: gets the true positions (3, N) NED after every step."""
     from pf_offboard.sweep.runner import finish_row
-    from sitl_mock.dynamics.sim import PHYSICS_DT_S
 
     setup = _Setup(tasks[0].config_yaml, tasks[0].settings)
     why = setup.unsupported(False)
