@@ -11,7 +11,9 @@ the one that flies:
 - :mod:`.law` — exact transverse terms, the thrust set and the control law
   (``pf_offboard.control.transverse`` / ``feasible`` / ``law``);
 - :mod:`.follower` — :class:`BatchFollower` (``pf_offboard.control.follower.PathFollower``);
-- :mod:`.dynamics` — :class:`BatchSimulator` (``sitl_mock.dynamics.Simulator``).
+- :mod:`.dynamics` — :class:`BatchSimulator` (``sitl_mock.dynamics.Simulator``);
+- :mod:`.flight` — sweep flights (``pf_offboard.sim.flight.SimFlight`` with the mock autopilot's
+  PX4 handling, the app's estimator and encoder, the sweep's judge) → the scalar engine's rows.
 
 Vectors are tuples of three ``(N,)`` arrays ``(x, y, z)``: the scalar code's float expressions
 translate one to one.
