@@ -29,8 +29,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cluster", metavar="ADDRESS",
                         help="run on Dask: a scheduler address (tcp://host:8786) or 'local' (a LocalCluster of --workers "
                         "processes); needs pip install 'pf-offboard[cluster]'")
+    parser.add_argument("--engine", choices=("batch", "scalar"), default="batch",
+                        help="batch (default): many flights per process stepped as arrays, the same rows as scalar; "
+                        "scalar: one flight at a time (the reference; flights batch does not mirror always fly so)")
     g = parser.add_argument_group("flights")
-    g.add_argument("--vehicle", choices=PRESET_NAMES, default=f.vehicle, help=f"simulated airframe (default {f.vehicle})")
+    g.add_argument("--vehicle", default=f.vehicle, metavar="PRESET[,PRESET...]",
+                   help=f"simulated airframe, one of {', '.join(PRESET_NAMES)} (default {f.vehicle}); several (comma-separated): "
+                   "every start (and gain candidate) flies on each, ranked per vehicle")
     g.add_argument("--autopilot", choices=("px4", "ardupilot"), default=f.autopilot, help="mock autopilot profile (default px4)")
     g.add_argument("--output", choices=("acceleration", "attitude", "rates"), help="setpoint type (default: config)")
     g.add_argument("--rate", type=float, metavar="HZ", help="control/telemetry rate (default: config)")
@@ -66,9 +71,19 @@ def _spec(args: argparse.Namespace) -> SweepSpec:
     from pf_offboard.sweep.runner import FlightSettings
     from pf_offboard.sweep.starts import StartRanges
 
+    from sitl_mock.dynamics.params import PRESET_NAMES
+
+    from pf_offboard.errors import InputError as _InputError
+
+    vehicles = tuple(v.strip() for v in str(args.vehicle).split(","))
+    for v in vehicles:
+        if v not in PRESET_NAMES:
+            raise _InputError("--vehicle", f"unknown vehicle {v!r}; choose from {', '.join(PRESET_NAMES)}")
+    if len(set(vehicles)) != len(vehicles):
+        raise _InputError("--vehicle", f"a vehicle given twice: {args.vehicle}")
     ranges = StartRanges(max_distance_m=args.max_distance, max_speed_m_s=args.max_speed, max_tilt_deg=args.max_tilt,
                          max_rate_rad_s=args.max_rate, max_wind_m_s=args.max_wind, min_height_m=args.min_height)
-    settings = FlightSettings(vehicle=args.vehicle, autopilot=args.autopilot, output_mode=args.output, duration_s=args.duration,
+    settings = FlightSettings(vehicle=vehicles[0], autopilot=args.autopilot, output_mode=args.output, duration_s=args.duration,
                               rate_hz=args.rate, tube_m=args.tube, stay_m=args.stay, speed_tol_m_s=args.speed_tol,
                               settle_s=args.settle)  # fmt: skip
     cands: tuple[gains_mod.GainCandidate, ...] = ()
@@ -87,7 +102,7 @@ def _spec(args: argparse.Namespace) -> SweepSpec:
                             ("--damping", args.damping != "0.6:1.2")):  # fmt: skip
             if given:
                 raise InputError(flag, "only a gain sweep (--gains grid|random) takes it")
-    return SweepSpec(args.flights, args.seed, ranges, settings, cands).validate()
+    return SweepSpec(args.flights, args.seed, ranges, settings, cands, vehicles if len(vehicles) > 1 else ()).validate()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -108,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     spec = _spec(args)
     out = Path(make_dir(args.out, "--out"))
     logs_dir = out / "flights" if args.keep_logs else None
-    progress = None if args.quiet else Progress(spec.flights * max(1, len(spec.gains)))
+    progress = None if args.quiet else Progress(spec.total_flights)
     with report.Journal(out / report.JOURNAL_CSV) as journal:
 
         def on_row(row: dict[str, object]) -> None:
@@ -116,29 +131,33 @@ def run(args: argparse.Namespace) -> int:
             if progress is not None:
                 progress(row)
 
-        result = plan.run(args.config, spec, args.workers, args.cluster, on_row, logs_dir)
+        result = plan.run(args.config, spec, args.workers, args.cluster, on_row, logs_dir, engine=args.engine)
     files = report.write_table(result.rows, out)
     (out / report.JOURNAL_CSV).unlink()
     from dataclasses import asdict
 
     stats = report.summarize(result.rows, args.config, asdict(spec.settings))
-    summary = {**stats, "wall_time_s": result.wall_s, "executor": result.executor, "workers": args.workers,
+    summary = {**stats, "wall_time_s": result.wall_s, "executor": result.executor, "engine": args.engine, "workers": args.workers,
                "cpu_count": os.cpu_count(), "load_average_at_end": list(os.getloadavg()), "config": args.config,
                "settings": plan.settings_dict(spec)}  # fmt: skip
-    print(f"pf-offboard sweep: {len(result.rows)} flights in {result.wall_s:.1f} s ({result.executor})")
+    print(f"pf-offboard sweep: {len(result.rows)} flights in {result.wall_s:.1f} s ({args.engine} engine, {result.executor})")
     for line in report.lines(stats):
         print("  " + line)
     if spec.gains:
         from pf_offboard.sweep.gains import rank
 
-        ranking = rank(result.rows, spec.gains)
-        files += report.write_table(ranking, out, "gains")
-        best = next(c for c in spec.gains if c.id == ranking[0]["gains_id"])
-        (out / "best-gains.yaml").write_text(plan.config_yaml(args.config, best), encoding="utf-8")
-        summary["gain_ranking"] = ranking
-        print("  gains (best first): " + "; ".join(
-            f"#{r['rank']} {r['bandwidth_hz']:.3g} Hz / {r['damping']:.3g}: {100 * r['success_rate']:.0f} %, p90 "
-            f"{r['convergence_p90_s']:.2f} s" for r in ranking[:5]))  # fmt: skip
+        # several vehicles: one ranking per vehicle (gains-<vehicle>.csv, best-gains-<vehicle>.yaml)
+        per_vehicle = [(f" on {v}", f"-{v}", [r for r in result.rows if r["vehicle"] == v]) for v in spec.vehicles] \
+            if spec.vehicles else [("", "", result.rows)]  # fmt: skip
+        for label, suffix, vrows in per_vehicle:
+            ranking = rank(vrows, spec.gains)
+            files += report.write_table(ranking, out, "gains" + suffix)
+            best = next(c for c in spec.gains if c.id == ranking[0]["gains_id"])
+            (out / f"best-gains{suffix}.yaml").write_text(plan.config_yaml(args.config, best), encoding="utf-8")
+            summary["gain_ranking" + suffix.replace("-", "_")] = ranking
+            print(f"  gains{label} (best first): " + "; ".join(
+                f"#{r['rank']} {r['bandwidth_hz']:.3g} Hz / {r['damping']:.3g}: {100 * r['success_rate']:.0f} %, p90 "
+                f"{r['convergence_p90_s']:.2f} s" for r in ranking[:5]))  # fmt: skip
     report.write_json(summary, out / "summary.json")
     if not args.no_plot:
         title = f"{len(result.rows)} thrown starts, {spec.settings.vehicle}: {100 * stats['success_rate']:.1f} % converged"

@@ -23,6 +23,19 @@ class SweepSpec:
     ranges: StartRanges = field(default_factory=StartRanges)
     settings: FlightSettings = field(default_factory=FlightSettings)
     gains: tuple[GainCandidate, ...] = ()
+    # several vehicle presets: every candidate flies every start on each (settings.vehicle unused)
+    vehicles: tuple[str, ...] = ()
+
+    @property
+    def flight_settings(self) -> tuple[FlightSettings, ...]:
+        """One FlightSettings per vehicle flown."""
+        from dataclasses import replace
+
+        return tuple(replace(self.settings, vehicle=v) for v in self.vehicles) if self.vehicles else (self.settings,)
+
+    @property
+    def total_flights(self) -> int:
+        return self.flights * max(1, len(self.gains)) * max(1, len(self.vehicles))
 
     def validate(self) -> SweepSpec:
         if not 1 <= self.flights <= MAX_FLIGHTS:
@@ -69,30 +82,31 @@ def tasks(config_path: str | Path, spec: SweepSpec, logs_dir: str | Path | None 
     spec.validate()
     s = spec.settings
     # the flags a SimSpec checks (vehicle, autopilot, rate), named as the sim names them
-    check_sim(SimSpec(throw_enu=(0.0, 0.0, 10.0, 0.0, 0.0, 0.0), autopilot=s.autopilot, vehicle=s.vehicle,
-                      rate_hz=s.rate_hz, duration_s=s.duration_s))  # fmt: skip
+    for fs in spec.flight_settings:
+        check_sim(SimSpec(throw_enu=(0.0, 0.0, 10.0, 0.0, 0.0, 0.0), autopilot=fs.autopilot, vehicle=fs.vehicle,
+                          rate_hz=fs.rate_hz, duration_s=fs.duration_s))  # fmt: skip
     base = config_yaml(config_path)
     from pf_offboard.config import load_config
 
     path = PathFollower.from_config(load_config(config_path).require_local()).path
     starts = [sample_start(path, spec.ranges, spec.seed, i) for i in range(spec.flights)]
     logs = str(logs_dir) if logs_dir is not None else None
-    if not spec.gains:
-        return [FlightTask(st, base, s, None, logs) for st in starts]
+    texts = [(None, base)] if not spec.gains else [(cand, config_yaml(config_path, cand)) for cand in spec.gains]
     out = []
-    for cand in spec.gains:
-        text = config_yaml(config_path, cand)
-        out.extend(FlightTask(st, text, s, cand, logs) for st in starts)
+    several = len(spec.vehicles) > 1
+    for k, fs in enumerate(spec.flight_settings):
+        for cand, text in texts:
+            out.extend(FlightTask(st, text, fs, cand, logs, k if several else None) for st in starts)
     return out
 
 
 def run(config_path: str | Path, spec: SweepSpec, workers: int = 1, cluster: str | None = None,
         on_row: Callable[[dict[str, Any]], None] | None = None, logs_dir: str | Path | None = None,
-        client: Any = None) -> SweepResult:  # fmt: skip
+        client: Any = None, engine: str = "batch") -> SweepResult:  # fmt: skip
     """Run every flight (see :func:`pf_offboard.sweep.runner.execute`) and time it."""
     todo = tasks(config_path, spec, logs_dir)
     t0 = time.perf_counter()
-    rows = execute(todo, workers, cluster, on_row, client=client)
+    rows = execute(todo, workers, cluster, on_row, client=client, engine=engine)
     wall = time.perf_counter() - t0
     executor = (f"dask {cluster}" if cluster else "dask client") if (cluster or client is not None) else (
         "serial" if workers == 1 else f"process pool ({workers} workers)")  # fmt: skip
@@ -100,5 +114,8 @@ def run(config_path: str | Path, spec: SweepSpec, workers: int = 1, cluster: str
 
 
 def settings_dict(spec: SweepSpec) -> dict[str, Any]:
-    return {"flights": spec.flights, "seed": spec.seed, "ranges": asdict(spec.ranges), "flight": asdict(spec.settings),
-            "gain_candidates": len(spec.gains)}  # fmt: skip
+    out = {"flights": spec.flights, "seed": spec.seed, "ranges": asdict(spec.ranges), "flight": asdict(spec.settings),
+           "gain_candidates": len(spec.gains)}  # fmt: skip
+    if spec.vehicles:
+        out["vehicles"] = list(spec.vehicles)
+    return out

@@ -123,7 +123,7 @@ def sim_command(row: Mapping[str, Any], config: str, flight: Mapping[str, Any]) 
     from pf_offboard.sweep.runner import EPOCH_UNIX_S
 
     args = [
-        "pf-offboard sim", f"--config {config}", f"--vehicle {flight['vehicle']}", f"--autopilot {flight['autopilot']}",
+        "pf-offboard sim", f"--config {config}", f"--vehicle {row.get('vehicle', flight['vehicle'])}", f"--autopilot {flight['autopilot']}",
         f"--throw={vec('pos_enu_{}_m', 'xyz')},{vec('vel_enu_{}_m_s', 'xyz')}", f"--throw-attitude={vec('q_enu_flu_{}', 'wxyz')}",
         f"--throw-rates={vec('rate_flu_{}_rad_s', 'xyz')}", "--throw-engage-after 0", f"--wind={vec('wind_enu_{}_m_s', 'xyz')}",
         f"--seed {row['sim_seed']}", f"--duration {flight['duration_s']!r}", f"--epoch {EPOCH_UNIX_S!r}",

@@ -79,10 +79,20 @@ class FlightTask:
     settings: FlightSettings
     gains: GainCandidate | None = None
     logs_dir: str | None = None  # write this flight's logs to <logs_dir>/flight-<index> (on the worker)
+    vehicle_index: int | None = None  # a sweep over several vehicles: this one's place (and a vehicle column)
 
     @property
-    def key(self) -> tuple[int, int]:
-        return (self.gains.id if self.gains is not None else -1, self.start.index)
+    def key(self) -> tuple[int, ...]:
+        key = (self.gains.id if self.gains is not None else -1, self.start.index)
+        return key if self.vehicle_index is None else (self.vehicle_index, *key)
+
+    def first_columns(self) -> dict[str, Any]:
+        """The row's leading columns: the vehicle (several vehicles), the gain candidate, the start."""
+        row: dict[str, Any] = {"vehicle": self.settings.vehicle} if self.vehicle_index is not None else {}
+        if self.gains is not None:
+            row.update(self.gains.columns())
+        row.update(self.start.columns())
+        return row
 
 
 class _Judge:
@@ -134,13 +144,13 @@ class _Judge:
         return self.summary.result()
 
 
-def run_flight(task: FlightTask) -> dict[str, Any]:
-    """Fly one task in process (no logs unless ``task.logs_dir``) and return its table row."""
-    from pf_offboard.sim.flight import SimFlight, SimSpec
+def sim_spec(task: FlightTask) -> Any:
+    """The :class:`pf_offboard.sim.SimSpec` a task flies."""
+    from pf_offboard.sim.flight import SimSpec
 
     st, s = task.start, task.settings
     name = f"flight-{st.index:06d}" + (f"-gains-{task.gains.id:03d}" if task.gains is not None else "")
-    spec = SimSpec(
+    return SimSpec(
         throw_enu=st.position_enu_m + st.velocity_enu_m_s,
         throw_q_enu_flu=st.q_enu_flu,
         throw_body_rates_flu_rad_s=st.body_rates_flu_rad_s,
@@ -155,8 +165,16 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
         epoch_unix_s=EPOCH_UNIX_S,
         name=name,
     )
-    row: dict[str, Any] = task.gains.columns() if task.gains is not None else {}
-    row.update(st.columns())
+
+
+def run_flight(task: FlightTask) -> dict[str, Any]:
+    """Fly one task in process (no logs unless ``task.logs_dir``) and return its table row."""
+    from pf_offboard.sim.flight import SimFlight
+
+    st, s = task.start, task.settings
+    spec = sim_spec(task)
+    name = spec.name
+    row = task.first_columns()
     with tempfile.TemporaryDirectory(prefix="pf-sweep-") as tmp:
         config_path = Path(tmp) / "config.yaml"
         config_path.write_text(task.config_yaml, encoding="utf-8")
@@ -171,27 +189,32 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
                                 math.nan))  # fmt: skip
             row["first_in_tube_time_s"] = math.nan
             return row
-    ground = result.crashed or result.reason.startswith("on the ground")
-    act, conv = judge.activation_s, judge.converged_s
-    reason = result.reason
+    summ = result.summary
+    judge_numbers = (judge.activation_s, judge.converged_s, judge.first_converged_s, judge.last_out_s, judge.max_out_m,
+                     judge.max_after_m, judge.rms_after_m)  # fmt: skip
+    return finish_row(row, s, result.reason, bool(result.crashed), result.sim_time_s, summ.whole_cross_track_max_m, *judge_numbers)
+
+
+def finish_row(row: dict[str, Any], s: FlightSettings, reason: str, crashed: bool, sim_time_s: float, ct_max: float | None,
+               act: float | None, conv: float | None, first: float | None, last: float | None, max_out_m: float,
+               max_after_m: float, rms_after_m: float) -> dict[str, Any]:  # fmt: skip
+    """The row's outcome columns from what a flight produced (shared by both engines: the same
+    numbers give the same row)."""
+    ground = crashed or reason.startswith("on the ground")
     if ground:
         success = False
     elif act is None or conv is None:
-        first, last = judge.first_converged_s, judge.last_out_s
         if first is not None and last is not None:
             success, reason = False, (f"{reason}; within {s.tube_m:g} m at {first:.2f} s, then beyond {s.stay_m:g} m "
-                                      f"(max {judge.max_out_m:.2f} m, last at {last:.2f} s) and not back by the end")  # fmt: skip
+                                      f"(max {max_out_m:.2f} m, last at {last:.2f} s) and not back by the end")  # fmt: skip
         else:
             success, reason = False, f"{reason}; never within {s.tube_m:g} m of the path"
-    elif result.sim_time_s - conv < s.settle_s - 1e-9:
-        success, reason = False, f"{reason}; converged only {result.sim_time_s - conv:.2f} s before the end"
+    elif sim_time_s - conv < s.settle_s - 1e-9:
+        success, reason = False, f"{reason}; converged only {sim_time_s - conv:.2f} s before the end"
     else:
         success = True
-    summ = result.summary
-    row.update(_outcome(success, bool(result.crashed), ground, reason, act, None if conv is None or act is None else conv - act,
-                        summ.whole_cross_track_max_m, judge.max_after_m if conv is not None else math.nan, judge.rms_after_m,
-                        result.sim_time_s))  # fmt: skip
-    first = judge.first_converged_s
+    row.update(_outcome(success, crashed, ground, reason, act, None if conv is None or act is None else conv - act,
+                        ct_max, max_after_m if conv is not None else math.nan, rms_after_m, sim_time_s))  # fmt: skip
     row["first_in_tube_time_s"] = first - act if (first is not None and act is not None) else math.nan
     return row
 
@@ -261,22 +284,56 @@ def check_workers(workers: int) -> int:
     return workers
 
 
+ENGINES = ("batch", "scalar")
+
+
 def execute(tasks: Sequence[FlightTask], workers: int = 1, cluster: str | None = None,
-            on_row: Callable[[dict[str, Any]], None] | None = None, client: Any = None) -> list[dict[str, Any]]:  # fmt: skip
+            on_row: Callable[[dict[str, Any]], None] | None = None, client: Any = None,
+            engine: str = "batch") -> list[dict[str, Any]]:  # fmt: skip
     """Every task's row, sorted by (gain candidate, flight), whatever ran them (module docstring).
 
     ``on_row``: called with each row as it comes back (a :class:`Progress`, a journal);
-    ``client``: an existing ``distributed.Client`` (tests, notebooks) instead of ``cluster``."""
+    ``client``: an existing ``distributed.Client`` (tests, notebooks) instead of ``cluster``;
+    ``engine``: ``batch`` flies the flights it mirrors as arrays, many per process
+    (:mod:`pf_offboard.sim.batch.flight`), and the rest one by one like ``scalar``: the same rows."""
     check_workers(workers)
+    if engine not in ENGINES:
+        raise InputError("--engine", f"must be one of {', '.join(ENGINES)}, got {engine!r}")
+    if engine == "batch":
+        return _collect(_batched(tasks, workers, cluster, client), len(tasks), on_row)
+    return _collect(_scalar(tasks, workers, cluster, client), len(tasks), on_row)
+
+
+def _scalar(tasks: Sequence[FlightTask], workers: int, cluster: str | None, client: Any) -> Iterable[tuple[tuple[int, int], dict[str, Any]]]:
+    if not tasks:
+        return iter(())
     if cluster is not None or client is not None:
         from pf_offboard.sweep.engine import run_on_dask
 
-        done = run_on_dask(tasks, run_flight, cluster, workers, client=client)
-    elif workers == 1:
-        done = ((t.key, run_flight(t)) for t in tasks)
+        return run_on_dask(tasks, run_flight, cluster, workers, client=client)
+    if workers == 1:
+        return ((t.key, run_flight(t)) for t in tasks)
+    return _pool(tasks, workers)
+
+
+def _batched(tasks: Sequence[FlightTask], workers: int, cluster: str | None, client: Any) -> Iterable[tuple[tuple[int, int], dict[str, Any]]]:
+    """Chunks of the batch engine, then the scalar flights (unsupported, or handed back)."""
+    from pf_offboard.sim.batch.flight import plan_chunks, run_chunk
+
+    dask = cluster is not None or client is not None
+    chunks, scalar = plan_chunks(tasks, workers if not dask else max(workers, 2))
+    if dask:
+        from pf_offboard.sweep.engine import run_on_dask
+
+        done = run_on_dask(chunks, run_chunk, cluster, workers, client=client)
+    elif workers == 1 or len(chunks) <= 1:
+        done = ((c.key, run_chunk(c)) for c in chunks)
     else:
-        done = _pool(tasks, workers)
-    return _collect(done, len(tasks), on_row)
+        done = _pool(chunks, workers, run_chunk)  # type: ignore[arg-type]
+    for _, result in done:
+        yield from result["rows"]
+        scalar.extend(result["redo"])
+    yield from _scalar(scalar, workers, cluster, client)
 
 
 def rows_equal(a: Sequence[dict[str, Any]], b: Sequence[dict[str, Any]]) -> bool:
@@ -289,11 +346,11 @@ def rows_equal(a: Sequence[dict[str, Any]], b: Sequence[dict[str, Any]]) -> bool
     return len(a) == len(b) and all(ra.keys() == rb.keys() and all(same(ra[k], rb[k]) for k in ra) for ra, rb in zip(a, b))
 
 
-def _pool(tasks: Sequence[FlightTask], workers: int) -> Iterable[tuple[tuple[int, int], dict[str, Any]]]:
+def _pool(tasks: Sequence[Any], workers: int, fn: Callable[[Any], Any] | None = None) -> Iterable[tuple[Any, Any]]:
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(run_flight, t): t.key for t in tasks}
+    with ProcessPoolExecutor(max_workers=min(workers, max(len(tasks), 1))) as pool:
+        futures = {pool.submit(fn or run_flight, t): t.key for t in tasks}
         try:
             for fut in as_completed(futures):
                 yield futures[fut], fut.result()
@@ -302,9 +359,9 @@ def _pool(tasks: Sequence[FlightTask], workers: int) -> Iterable[tuple[tuple[int
                 fut.cancel()
 
 
-def _collect(done: Iterable[tuple[tuple[int, int], dict[str, Any]]], total: int,
+def _collect(done: Iterable[tuple[tuple[int, ...], dict[str, Any]]], total: int,
              on_row: Callable[[dict[str, Any]], None] | None) -> list[dict[str, Any]]:  # fmt: skip
-    rows: dict[tuple[int, int], dict[str, Any]] = {}
+    rows: dict[tuple[int, ...], dict[str, Any]] = {}
     for key, row in done:
         rows[key] = row
         if on_row is not None:

@@ -101,3 +101,15 @@ def test_bad_settings_name_the_flag(kwargs: dict[str, float], flag: str) -> None
 def test_workers_out_of_range(tasks) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(InputError, match="--workers"):
         execute(tasks, workers=0)
+
+
+def test_batch_chunks_on_a_process_pool_give_the_scalar_rows(tasks, serial_rows, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+    from pf_offboard.sim.batch import flight as batch_flight
+
+    monkeypatch.setattr(batch_flight, "MIN_CHUNK", 2)  # 4 flights: two chunks, one per worker
+    chunks, scalar = batch_flight.plan_chunks(tasks, parts=2)
+    assert [len(c.tasks) for c in chunks] == [2, 2] and not scalar
+    assert rows_equal(execute(tasks, workers=2, engine="batch"), serial_rows)
+    assert rows_equal(execute(tasks, workers=1, engine="scalar"), serial_rows)
+    with pytest.raises(InputError, match="--engine"):
+        execute(tasks, engine="fast")

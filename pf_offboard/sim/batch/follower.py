@@ -1,0 +1,593 @@
+"""The path follower for N flights at once (mirrors :class:`pf_offboard.control.PathFollower`,
+its speed profile, yaw profile, feed-forward and inner-loop compensator, function by function).
+
+Built from a scalar :class:`~pf_offboard.control.PathFollower` (the same Gains / Limits / Config
+objects), whose constants it reads, so a change of the scalar controller's defaults reaches both
+engines; a change of its *code* needs the mirrored edit here (the equality tests catch drift).
+The compensator's clock is shared by the batch (every flight is sampled at the same instants,
+as in a lockstep sweep).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pf_offboard.control import follower as F
+from pf_offboard.control.compensator import MAX_GAP_S
+from pf_offboard.control.types import GRAVITY_M_S2
+from pf_offboard.sim.batch.geometry import BatchPath, atan2, power
+from pf_offboard.sim.batch.law import BatchLaw, LawOut, Terms, _where3, exact_terms
+from pf_offboard.sim.batch.projection import BatchProjector
+
+Arr = NDArray[np.float64]
+Mask = NDArray[np.bool_]
+V = tuple[Arr, Arr, Arr]
+G = GRAVITY_M_S2
+
+
+class BatchCommand(NamedTuple):
+    """:class:`pf_offboard.control.types.Command` for N flights (arrays with a leading axis of N
+    for vectors: acceleration (N, 3), attitude (N, 4), body_rates (N, 3))."""
+
+    acceleration: Arr
+    thrust: Arr
+    attitude: Arr
+    body_rates: Arr
+    yaw: Arr
+    yaw_rate: Arr
+    eta1: Arr
+    eta2: Arr
+    xi1: Arr
+    xi2: Arr
+    phi1: Arr
+    phi2: Arr
+    lam: Arr
+    cross_track_m: Arr
+    sat_tangential: Mask
+    sat_transversal: Mask
+    sat_tilt: Mask
+    sat_thrust: Mask
+    sat_approach_speed: Mask
+    eta2_ref_m_s: Arr
+    finite: Mask  # False: the scalar follower would have raised (no finite command)
+
+
+def _approach_weight(tube: Arr, dist_m: Arr) -> Arr:
+    return np.maximum((tube - F.TUBE_INNER) / (F.TUBE_OUTER - F.TUBE_INNER), (dist_m - F.FAR_INNER_M) / (F.FAR_OUTER_M - F.FAR_INNER_M))
+
+
+def _blended_speed(eta2: Arr, w: Arr, tan: V, v: V) -> Arr:
+    v_t = tan[0] * v[0] + tan[1] * v[1] + tan[2] * v[2]
+    return np.where(w <= 0.0, eta2, np.where(w >= 1.0, v_t, (1.0 - w) * eta2 + w * v_t))
+
+
+def onpath_derivatives(d1: V, d2: V, d3: V) -> tuple[V, V, V]:
+    """:func:`pf_offboard.control.feedforward.onpath_derivatives`."""
+    ax, ay, az = d1
+    bx, by, bz = d2
+    cx, cy, cz = d3
+    s2 = ax * ax + ay * ay + az * az
+    s = np.sqrt(s2)
+    inv = 1.0 / s
+    sp = (ax * bx + ay * by + az * bz) * inv
+    spp = (bx * bx + by * by + bz * bz + ax * cx + ay * cy + az * cz) * inv - sp * sp * inv
+    i2 = inv * inv
+    i3 = i2 * inv
+    i4 = i3 * inv
+    k1 = sp * i3
+    t = (ax * inv, ay * inv, az * inv)
+    ss = (bx * i2 - ax * k1, by * i2 - ay * k1, bz * i2 - az * k1)
+    kb = 3.0 * sp * i4
+    ka = -spp * i4 + 3.0 * sp * sp * i4 * inv
+    sss = (cx * i3 - bx * kb + ax * ka, cy * i3 - by * kb + ay * ka, cz * i3 - bz * kb + az * ka)
+    return t, ss, sss
+
+
+def attitude_from_thrust(f: V, yaw_rad: Arr) -> tuple[V, V, V]:
+    """:func:`pf_offboard.control.feedforward.attitude_from_thrust`."""
+    fx, fy, fz = f
+    inv = 1.0 / np.sqrt(fx * fx + fy * fy + fz * fz)
+    zx, zy, zz = fx * inv, fy * inv, fz * inv
+    cy = np.cos(yaw_rad)
+    sy = np.sin(yaw_rad)
+    xx = cy * zz
+    xy = sy * zz
+    xz = -sy * zy - cy * zx
+    n = 1.0 / np.sqrt(xx * xx + xy * xy + xz * xz)
+    xx, xy, xz = xx * n, xy * n, xz * n
+    return (xx, xy, xz), (zy * xz - zz * xy, zz * xx - zx * xz, zx * xy - zy * xx), (zx, zy, zz)
+
+
+def quaternion_from_axes(xb: V, yb: V, zb: V) -> tuple[Arr, Arr, Arr, Arr]:
+    """:func:`pf_offboard.control.feedforward.quaternion_from_axes` (Shepperd's branches as masks)."""
+    m00, m10, m20 = xb
+    m01, m11, m21 = yb
+    m02, m12, m22 = zb
+    tr = m00 + m11 + m22
+    b0 = tr > 0.0
+    b1 = ~b0 & (m00 > m11) & (m00 > m22)
+    b2 = ~b0 & ~b1 & (m11 > m22)
+    arg = np.where(b0, tr + 1.0, np.where(b1, 1.0 + m00 - m11 - m22, np.where(b2, 1.0 + m11 - m00 - m22, 1.0 + m22 - m00 - m11)))
+    s = 2.0 * np.sqrt(np.maximum(arg, 0.0))
+    s = np.where(s == 0.0, 1.0, s)
+    q0 = np.where(b0, 0.25 * s, np.where(b1, (m21 - m12) / s, np.where(b2, (m02 - m20) / s, (m10 - m01) / s)))
+    q1 = np.where(b0, (m21 - m12) / s, np.where(b1, 0.25 * s, np.where(b2, (m01 + m10) / s, (m02 + m20) / s)))
+    q2 = np.where(b0, (m02 - m20) / s, np.where(b1, (m01 + m10) / s, np.where(b2, 0.25 * s, (m12 + m21) / s)))
+    q3 = np.where(b0, (m10 - m01) / s, np.where(b1, (m02 + m20) / s, np.where(b2, (m12 + m21) / s, 0.25 * s)))
+    neg = q0 < 0.0
+    q0, q1, q2, q3 = np.where(neg, -q0, q0), np.where(neg, -q1, q1), np.where(neg, -q2, q2), np.where(neg, -q3, q3)
+    n = 1.0 / np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    return q0 * n, q1 * n, q2 * n, q3 * n
+
+
+def body_rates(axes: tuple[V, V, V], thrust: Arr, jerk: V, yaw_rate: Arr) -> V:
+    """:func:`pf_offboard.control.feedforward.body_rates`."""
+    xb, yb, zb = axes
+    jx, jy, jz = jerk
+    jz_b = zb[0] * jx + zb[1] * jy + zb[2] * jz
+    inv = 1.0 / thrust
+    hx = (jx - jz_b * zb[0]) * inv
+    hy = (jy - jz_b * zb[1]) * inv
+    hz = (jz - jz_b * zb[2]) * inv
+    wy = xb[0] * hx + xb[1] * hy + xb[2] * hz
+    wx = -(yb[0] * hx + yb[1] * hy + yb[2] * hz)
+    wz = ((1.0 - xb[2] * xb[2]) * yaw_rate - yb[2] * wy) / zb[2]
+    return wx, wy, wz
+
+
+class _Profile:
+    """:meth:`pf_offboard.control.profile.SpeedProfile.evaluate` on arrays."""
+
+    def __init__(self, p: Any) -> None:
+        self.p = p
+        self.c = np.array(p._c, dtype=float)
+
+    def evaluate(self, eta1: Arr) -> tuple[Arr, Arr, Arr]:
+        p = self.p
+        L, ds, n, c = p.length_m, p._ds, p._n, self.c
+        x = np.mod(eta1, L) if p.closed else np.where(eta1 < 0.0, 0.0, np.where(eta1 > L, L, eta1))
+        u = x / ds
+        i = np.floor(u + 0.5).astype(np.int64)
+        tau = u - i
+        if p.closed:
+            cm, c0, cp = c[(i - 1) % n], c[i % n], c[(i + 1) % n]
+        else:
+            i = np.where(i > n - 1, n - 1, i)
+            c0 = c[i]
+            cm = np.where(i > 0, c[np.maximum(i - 1, 0)], 2.0 * c[0] - c[1])
+            cp = np.where(i < n - 1, c[np.minimum(i + 1, n - 1)], 2.0 * c[n - 1] - c[n - 2])
+        lo, hi = 0.5 - tau, 0.5 + tau
+        b = 0.5 * cm * lo * lo + c0 * (0.75 - tau * tau) + 0.5 * cp * hi * hi
+        zero = b <= 1e-12
+        db = (cp * hi - cm * lo - 2.0 * tau * c0) / ds
+        ddb = (cm - 2.0 * c0 + cp) / (ds * ds)
+        v = np.sqrt(np.where(zero, 1.0, b))
+        dv = 0.5 * db / v
+        ddv = (0.5 * ddb - dv * dv) / v
+        s = p.direction
+        return np.where(zero, 0.0, s * v), np.where(zero, 0.0, s * dv), np.where(zero, 0.0, s * ddv)
+
+
+class _Compensator:
+    """:class:`pf_offboard.control.compensator.InnerLoopCompensator` for N flights sampled at the
+    same instants (the recorded setpoints share their times; their values are per flight)."""
+
+    def __init__(self, c: Any, n: int) -> None:
+        self.c = c
+        self.n = n
+        self.horizon_s, self.hold_s, self.lag, self.gain, self.drag = c.horizon_s, c.hold_s, c.lag, c.gain, c.drag
+        self.observer_rad_s, self.max_disturbance_m_s2 = c.observer_rad_s, c.max_disturbance_m_s2
+        self._history_s = c._history_s
+        self.reset()
+
+    def reset(self) -> None:
+        z = np.zeros(self.n)
+        self._t: float | None = None
+        self._v_hat = (z, z, z)
+        self._a_f = (z, z, z)
+        self.disturbance = (z, z, z)
+        self._sent: list[tuple[float, V]] = []
+        self._t_int: float | None = None
+        self.speed_offset_m_s = z
+        self.xi1_offset_m = z
+        self.phi1_offset_m = z
+
+    def integral_offsets(self) -> tuple[Arr, Arr, Arr]:
+        return self.speed_offset_m_s, self.xi1_offset_m, self.phi1_offset_m
+
+    def integrate(self, time_s: float, speed_error: Arr, xi1: Arr, phi1: Arr, free: Mask) -> None:
+        c = self.c
+        t_prev, self._t_int = self._t_int, time_s
+        if t_prev is None or not (0.0 < time_s - t_prev <= MAX_GAP_S):
+            return
+        dt = time_s - t_prev
+        ks, kx = c.speed_integral_rad_s * dt, c.offset_integral_rad_s * dt
+        vmax, pmax = c.max_speed_offset_m_s, c.max_position_offset_m
+        self.speed_offset_m_s = np.where(free, np.minimum(vmax, np.maximum(-vmax, self.speed_offset_m_s + ks * speed_error)), self.speed_offset_m_s)
+        self.xi1_offset_m = np.where(free, np.minimum(pmax, np.maximum(-pmax, self.xi1_offset_m + kx * xi1)), self.xi1_offset_m)
+        self.phi1_offset_m = np.where(free, np.minimum(pmax, np.maximum(-pmax, self.phi1_offset_m + kx * phi1)), self.phi1_offset_m)
+
+    def _pieces(self, t0: float, t1: float, delay: float) -> list[tuple[float, V | None]]:
+        z = None
+        cur: V | None = z
+        out: list[tuple[float, V | None]] = []
+        tau = t0
+        for ts, a in self._sent:
+            t_on = ts + delay
+            if t_on <= t0 + 1e-9:
+                cur = a
+                continue
+            if t_on >= t1:
+                break
+            out.append((t_on - tau, cur))
+            tau, cur = t_on, a
+        out.append((t1 - tau, cur))
+        return out
+
+    def _advance(self, a_f: list[Arr], v: list[Arr], p: list[Arr], t0: float, t1: float) -> None:
+        for h, u_sp in self._pieces(t0, t1, self.horizon_s):
+            if h <= 0.0:
+                continue
+            for i in range(3):
+                u = self.gain[i] * (u_sp[i] if u_sp is not None else 0.0)
+                lag = self.lag[i]
+                if lag > 0.0:
+                    alpha = math.exp(-h / lag)
+                    mean_a = u + (a_f[i] - u) * (lag / h) * (1.0 - alpha)
+                    a_f[i] = u + (a_f[i] - u) * alpha
+                else:
+                    mean_a = a_f[i] = u + 0.0 * a_f[i]
+                acc = mean_a - self.drag[i] * v[i] + self.disturbance[i]
+                p[i] = p[i] + h * (v[i] + 0.5 * h * acc)
+                v[i] = v[i] + h * acc
+
+    def predict(self, time_s: float, position: V, velocity: V) -> tuple[V, V]:
+        t_prev = self._t
+        if t_prev is not None and time_s <= t_prev:
+            return self._extrapolate(time_s, position, velocity)
+        if t_prev is None or time_s - t_prev > MAX_GAP_S:
+            self.reset()
+            self._t = time_s
+            self._v_hat = velocity
+            return self._extrapolate(time_s, position, velocity)
+        dt = time_s - t_prev
+        a_f, vh, ph = list(self._a_f), list(self._v_hat), [0.0, 0.0, 0.0]
+        self._advance(a_f, vh, ph, t_prev, time_s)  # type: ignore[arg-type]
+        w = self.observer_rad_s
+        l1, l2 = 2.0 * w * dt, w * w * dt
+        dmax = self.max_disturbance_m_s2
+        dh = list(self.disturbance)
+        for i in range(3):
+            e = velocity[i] - vh[i]
+            vh[i] = vh[i] + l1 * e
+            d = dh[i] + l2 * e
+            dh[i] = np.where(d > dmax, dmax, np.where(d < -dmax, -dmax, d))
+        self._a_f = (a_f[0], a_f[1], a_f[2])
+        self._v_hat = (vh[0], vh[1], vh[2])
+        self.disturbance = (dh[0], dh[1], dh[2])
+        self._t = time_s
+        return self._extrapolate(time_s, position, velocity)
+
+    def _extrapolate(self, time_s: float, position: V, velocity: V) -> tuple[V, V]:
+        if self.horizon_s <= 0.0:
+            return position, velocity
+        a_f, v, p = list(self._a_f), list(velocity), list(position)
+        self._advance(a_f, v, p, time_s, time_s + self.horizon_s)
+        return (p[0], p[1], p[2]), (v[0], v[1], v[2])
+
+    def lead(self, accel: V, jerk: V) -> V:
+        lag = self.lag
+        return (accel[0] + lag[0] * jerk[0], accel[1] + lag[1] * jerk[1], accel[2] + lag[2] * jerk[2])
+
+    def invert(self, accel: V, velocity_pred: V) -> V:
+        d = self.disturbance
+        return (
+            (accel[0] + self.drag[0] * velocity_pred[0] - d[0]) / self.gain[0],
+            (accel[1] + self.drag[1] * velocity_pred[1] - d[1]) / self.gain[1],
+            (accel[2] + self.drag[2] * velocity_pred[2] - d[2]) / self.gain[2],
+        )
+
+    @property
+    def holds(self) -> bool:
+        return self.hold_s[0] > 0.0 or self.hold_s[2] > 0.0
+
+    def outgoing(self, time_s: float) -> V:
+        sent = self._sent
+        if not sent:
+            z = np.zeros(self.n)
+            return (z, z, z)
+        out = []
+        for i in range(3):
+            cutoff = time_s - self.hold_s[i] + 1e-9
+            value = sent[0][1][i]
+            for ts, a in sent:
+                if ts > cutoff:
+                    break
+                value = a[i]
+            out.append(value)
+        return (out[0], out[1], out[2])
+
+    def commit(self, time_s: float, setpoint: V, clip: Any) -> V:
+        def feasible(a: V) -> V:
+            fc = clip((a[0], a[1], a[2] + G))
+            return (fc[0], fc[1], fc[2] - G)
+
+        sent = feasible(setpoint)
+        self.record(time_s, sent)
+        return feasible(self.outgoing(time_s)) if self.holds else sent
+
+    def record(self, time_s: float, setpoint: V) -> None:
+        sent = self._sent
+        if sent and time_s < sent[-1][0]:
+            return
+        sent.append((time_s, setpoint))
+        horizon = time_s - self._history_s
+        while len(sent) > 1 and sent[1][0] <= horizon:
+            sent.pop(0)
+
+
+class _StartRamp:
+    """The scalar follower's start ramp (``PathFollower._ramp``, when the scalar follower has one)
+    for N flights: the reference speed rises as ``sqrt(v0^2 + 2 a s)`` over the distance ``s``
+    travelled along the path since activation, until it reaches the reference (then done)."""
+
+    def __init__(self, ramp: Any, n: int) -> None:
+        self.accel = ramp.accel
+        self.lap = ramp.lap
+        self.sign = ramp.sign
+        self.n = n
+        self.reset()
+
+    def reset(self) -> None:
+        n = self.n
+        self.done = np.full(n, self.accel is None)
+        self._eta1 = np.full(n, math.nan)  # NaN: not started (the scalar's None)
+        self._s = np.zeros(n)
+        self._v0 = np.zeros(n)
+
+    def _travelled(self, eta1: Arr) -> Arr:
+        d = eta1 - self._eta1
+        if self.lap is not None:
+            half = 0.5 * self.lap
+            d = np.mod(d + half, self.lap) - half
+        s = self._s + self.sign * d
+        return np.where(s > 0.0, s, 0.0)
+
+    def advance(self, eta1: Arr, speed_along: Arr, rows: Mask) -> None:
+        rows = rows & ~self.done
+        start = rows & np.isnan(self._eta1)
+        v0 = self.sign * speed_along
+        self._v0 = np.where(start, np.where((v0 > 0.0) & np.isfinite(v0), v0, 0.0), self._v0)
+        self._s = np.where(start, 0.0, np.where(rows, self._travelled(eta1), self._s))
+        self._eta1 = np.where(rows, eta1, self._eta1)
+
+    def speed(self, eta1: Arr) -> Arr:
+        """|eta2_ref| the ramp allows (NaN: none — done or not started)."""
+        if self.accel is None:
+            return np.full(self.n, math.nan)
+        on = ~self.done & ~np.isnan(self._eta1)
+        v = np.sqrt(self._v0 * self._v0 + 2.0 * self.accel * self._travelled(eta1))
+        return np.where(on, v, math.nan)
+
+
+class BatchFollower:
+    """N copies of a scalar :class:`~pf_offboard.control.PathFollower` (its path, gains, limits,
+    yaw, speed profile, compensator), stepped together: :meth:`update` takes positions and
+    velocities of shape (N, 3) and returns a :class:`BatchCommand`."""
+
+    def __init__(self, follower: Any, n: int, per_flight: list[Any] | None = None) -> None:
+        if follower.feedforward != "on_path":
+            raise NotImplementedError("the batch engine mirrors feedforward: on_path only (any_state: use --engine scalar)")
+        self.scalar = follower
+        self.n = n
+        self.path = follower.path
+        self.bpath = BatchPath(follower.path)
+        self.projector = BatchProjector(follower.path, n, self.bpath)
+        # per_flight: one scalar ControlLaw (or follower) per row, differing from ``follower``'s in its gains only
+        laws = None if per_flight is None else [getattr(f, "law", f) for f in per_flight]
+        self.law = BatchLaw(follower.gains, follower.limits, laws)
+        self.speed = follower.speed
+        self.profile = _Profile(follower.profile) if follower.profile is not None else None
+        self.compensator = _Compensator(follower.compensator, n) if follower.compensator is not None else None
+        self._measured_projector = BatchProjector(follower.path, n, self.bpath) if self.compensator is not None else None
+        self._yaw = follower._yaw
+        ramp = getattr(follower, "_ramp", None)
+        self._ramp = _StartRamp(ramp, n) if ramp is not None else None
+        self._closed = bool(follower.path.closed)
+        self._lam_max = float(follower.path.lam_max)
+        self._length = float(follower.path.length_m)
+
+    def reset(self) -> None:
+        self.projector.reset()
+        if self._ramp is not None:
+            self._ramp.reset()
+        if self.compensator is not None:
+            self.compensator.reset()
+            self._measured_projector.reset()  # type: ignore[union-attr]
+
+    # ------------------------------------------------------------------ exact coordinates
+    def _terms(self, y: V, v: V, projector: BatchProjector | None = None) -> tuple[Arr, tuple[Arr, ...], Terms]:
+        lam = (projector or self.projector).update(*y)
+        return (lam, *self.terms_at(lam, y, v))
+
+    def terms_at(self, lam: Arr, y: V, v: V) -> tuple[tuple[Arr, ...], Terms]:
+        """:func:`pf_offboard.control.follower.evaluate_terms` at given parameters."""
+        bp = self.bpath
+        s = bp.eval_floats(lam)
+        (_, _, _), (e2, de2, dde2), (e3, de3, dde3) = bp.frame_jets(lam, s)
+        terms = exact_terms(bp.arclength(lam), s[0:3], s[3:6], s[6:9], s[9:12], e2, de2, dde2, e3, de3, dde3, y, v)
+        return s, terms
+
+    # ------------------------------------------------------------------ control
+    def reference(self, eta1: Arr) -> tuple[Arr, Arr, Arr]:
+        """``PathFollower.reference`` (and ``reference_speed``)."""
+        law = self.law
+        z = np.zeros_like(eta1)
+        if self.profile is None:
+            if self._closed:
+                return np.full_like(eta1, self.speed), z, z
+            ahead = self._length - eta1 if self.speed > 0.0 else eta1
+            stop = law.stopping_speed(ahead)
+            return np.where(abs(self.speed) <= stop, self.speed, np.copysign(stop, self.speed)), z, z
+        e, de, dde = self.profile.evaluate(eta1)
+        if self._closed:
+            return e, de, dde
+        sign = 1.0 if self.speed > 0.0 else -1.0
+        ahead = self._length - eta1 if sign > 0.0 else eta1
+        stop = law.stopping_speed(ahead)
+        keep = stop >= np.abs(e)
+        past = ahead <= 0.0
+        lin = law.k_pos_t * ahead
+        linear = lin <= stop
+        st = np.where(stop > 0.0, stop, 1.0)
+        a_dec = law.a_dec
+        e_s = np.where(past, 0.0, sign * stop)
+        de_s = np.where(past, 0.0, np.where(linear, -law.k_pos_t, -a_dec / st))
+        dde_s = np.where(past | linear, 0.0, sign * -a_dec * a_dec / power(st, 3.0))
+        return np.where(keep, e, e_s), np.where(keep, de, de_s), np.where(keep, dde, dde_s)
+
+    def _evaluate(self, y: V, v: V, lam: Arr, s: tuple[Arr, ...], terms: Terms,
+                  offsets: tuple[Arr, Arr, Arr] | None) -> tuple[Any, ...]:  # fmt: skip
+        """``PathFollower._evaluate``."""
+        eta2_ref, deta2, ddeta2 = self.reference(terms.eta1)
+        ff = deta2 * terms.eta2 if self.profile is not None else None
+        cap = None
+        if self._ramp is not None:  # the start ramp: its speed, feed-forward and bound where it is below the reference
+            ff = deta2 * terms.eta2
+            ramp = self._ramp.speed(terms.eta1)
+            on = ~np.isnan(ramp) & (ramp < np.abs(eta2_ref))
+            a = self._ramp.accel if self._ramp.accel is not None else math.inf
+            cap = np.where(on, a, math.inf)
+            fade = np.minimum(1.0, (np.abs(eta2_ref) - ramp) / (a * F.RAMP_END_S))
+            ff = np.where(on, self._ramp.sign * a * fade, ff)
+            eta2_ref = np.where(on, np.copysign(ramp, eta2_ref), eta2_ref)
+            deta2 = np.where(on, 0.0, deta2)
+            ddeta2 = np.where(on, 0.0, ddeta2)
+        r = (y[0] - s[0], y[1] - s[1], y[2] - s[2])
+        dist = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+        w = _approach_weight(terms.tube, dist)
+        past_end = np.zeros(len(lam), dtype=bool)
+        if not self._closed:
+            at_end = (lam <= 0.0) | (lam >= self._lam_max)
+            out = np.where(lam > 0.0, terms.tangential_offset_m, -terms.tangential_offset_m)
+            hit = at_end & (out > 0.0)
+            past_end = hit & ((lam > 0.0) == (self.speed > 0.0))
+            w = np.where(hit, np.maximum(w, out / F.END_BLEND_M), w)
+        w = np.where(w <= 0.0, 0.0, np.where(w >= 1.0, 1.0, w))
+        law = self.law
+        eta2_ref_law = eta2_ref
+        st = terms
+        if offsets is not None:
+            b_eta2, b_xi1, b_phi1 = offsets
+            use = w < 1.0
+            eta2_ref_law = np.where(use, eta2_ref + b_eta2, eta2_ref)
+            terms = terms._replace(xi1=np.where(use, terms.xi1 + b_xi1, terms.xi1), phi1=np.where(use, terms.phi1 + b_phi1, terms.phi1))
+        tube, ok = law.tube(terms, eta2_ref_law, ff, tangential_cap=cap)
+        has_tube = (w < 1.0) & ok
+        w = np.where(has_tube, w, 1.0)
+        tan, s_ss, s_sss = onpath_derivatives(s[3:6], s[6:9], s[9:12])
+        app = law.approach(r, v, tan, np.where(past_end, 0.0, eta2_ref), cap)
+        k = 1.0 - w
+        blend = (k * tube.accel[0] + w * app.accel[0], k * tube.accel[1] + w * app.accel[1], k * tube.accel[2] + w * app.accel[2])
+        only_app = w >= 1.0  # no tube output (w = 1) or the approach alone
+        only_tube = w <= 0.0
+        acc = _where3(only_app, app.accel, _where3(only_tube, tube.accel, blend))
+        res = LawOut(
+            acc,
+            np.where(only_app, app.tangential, np.where(only_tube, tube.tangential, tube.tangential | app.tangential)),
+            np.where(only_app, app.transversal, np.where(only_tube, tube.transversal, tube.transversal | app.transversal)),
+            np.where(only_app, app.approach_speed, np.where(only_tube, tube.approach_speed, tube.approach_speed | app.approach_speed)),
+        )
+        return st, eta2_ref, deta2, ddeta2, w, res, tan, s_ss, s_sss, dist
+
+    def _onpath_jerk(self, e: Arr, de: Arr, dde: Arr, w: Arr, tan: V, ss: V, s_sss: V) -> V:
+        k3 = (1.0 - w) * e * e * e
+        jerk = (s_sss[0] * k3, s_sss[1] * k3, s_sss[2] * k3)
+        if self.profile is None:
+            return jerk
+        k2 = (1.0 - w) * 3.0 * e * e * de
+        k1 = (1.0 - w) * e * (dde * e + de * de)
+        t = tan
+        return (jerk[0] + ss[0] * k2 + t[0] * k1, jerk[1] + ss[1] * k2 + t[1] * k1, jerk[2] + ss[2] * k2 + t[2] * k1)
+
+    def _yaw_evaluate(self, eta1: Arr, tan: V, ss: V) -> tuple[Arr, Arr]:
+        yp = self._yaw
+        if yp.mode == "constant":
+            return np.full_like(eta1, yp.offset), np.zeros_like(eta1)
+        if yp.mode == "table":  # the scalar table per flight (a pure function of eta1)
+            tab = np.array([yp._table(e) for e in eta1.tolist()]).reshape(-1, 2)
+            return tab[:, 0], tab[:, 1]
+        hx = yp.direction * tan[0]
+        hy = yp.direction * tan[1]
+        n2 = hx * hx + hy * hy
+        psi = atan2(hy, hx) + yp.offset
+        vert = n2 < 1e-6
+        dpsi = (tan[0] * ss[1] - tan[1] * ss[0]) / np.where(vert, 1.0, n2)
+        return psi, np.where(vert, 0.0, dpsi)
+
+    def update(self, position: Arr, velocity: Arr, time_s: float | None = None) -> BatchCommand:
+        """``PathFollower.update`` for every flight: positions and velocities (N, 3), ENU."""
+        y: V = (position[:, 0].astype(float), position[:, 1].astype(float), position[:, 2].astype(float))
+        v: V = (velocity[:, 0].astype(float), velocity[:, 1].astype(float), velocity[:, 2].astype(float))
+        comp = self.compensator if time_s is not None else None
+        y_meas, v_meas = y, v
+        with np.errstate(all="ignore"):
+            if comp is not None:
+                t_s = float(time_s)  # type: ignore[arg-type]
+                y, v = comp.predict(t_s, y, v)
+                bad = ~np.all(np.isfinite(np.array(y + v)), axis=0)
+                if bad.any():
+                    raise FloatingPointError("batch compensator: a non-finite prediction (the scalar one resets here)")
+            lam, s, terms = self._terms(y, v)
+            ramp = self._ramp
+            if ramp is not None and not ramp.done.all():
+                d1 = s[3:6]
+                n1 = np.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+                eta1 = terms.eta1
+                rows = ~ramp.done
+                ramp.advance(eta1, (v[0] * d1[0] + v[1] * d1[1] + v[2] * d1[2]) / n1, rows)
+                allowed = ramp.speed(eta1)
+                ramp.done = ramp.done | (rows & ~np.isnan(allowed) & (allowed >= np.abs(self.reference(eta1)[0]) - F.RAMP_DONE_M_S))
+            offsets = comp.integral_offsets() if comp is not None else None
+            st, eta2_ref, deta2, ddeta2, w, res, tan, s_ss, s_sss, dist = self._evaluate(y, v, lam, s, terms, offsets)
+            law = self.law
+            ax, ay, az = res.accel
+            jerk = self._onpath_jerk(eta2_ref, deta2, ddeta2, w, tan, s_ss, s_sss)
+            if comp is not None:
+                sp = comp.invert(comp.lead((ax, ay, az), jerk), v)
+                ax, ay, az = comp.commit(t_s, sp, law.thrust_set.clip)
+                zero = np.zeros_like(ax)
+                jerk_rates: V = (zero, zero, zero)
+            else:
+                jerk_rates = jerk
+            f = (ax, ay, az + G)
+            thrust = np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+            tilt, thrust_sat = law.thrust_set.active(f)
+            psi, dpsi = self._yaw_evaluate(st.eta1, tan, s_ss)
+            eta2 = _blended_speed(st.eta2, w, tan, v)
+            yaw_rate = dpsi * eta2
+            axes = attitude_from_thrust(f, psi)
+            q = quaternion_from_axes(*axes)
+            omega = body_rates(axes, thrust, jerk_rates, yaw_rate)
+            finite = np.all(np.isfinite(np.array((ax, ay, az, *q, *omega, thrust, psi, yaw_rate))), axis=0)
+            if comp is not None:
+                lam = self._measured_projector.update(*y_meas)  # type: ignore[union-attr]
+                sm, mt = self.terms_at(lam, y_meas, v_meas)
+                dist = np.sqrt((y_meas[0] - sm[0]) ** 2 + (y_meas[1] - sm[1]) ** 2 + (y_meas[2] - sm[2]) ** 2)
+                t_m = sm[3:6]
+                n_t = np.sqrt(t_m[0] * t_m[0] + t_m[1] * t_m[1] + t_m[2] * t_m[2])
+                w_m = np.minimum(_approach_weight(mt.tube, dist), 1.0)
+                st = mt._replace(eta2=_blended_speed(mt.eta2, w_m, (t_m[0] / n_t, t_m[1] / n_t, t_m[2] / n_t), v_meas))
+                free = (w == 0.0) & ~(res.tangential | res.transversal | tilt | thrust_sat)
+                comp.integrate(t_s, eta2_ref - st.eta2, st.xi1, st.phi1, free)
+            a = np.fmod(psi + math.pi, 2.0 * math.pi)
+            yaw = np.where(a <= 0.0, a + 2.0 * math.pi, a) - math.pi  # frames.wrap_pi
+        return BatchCommand(
+            np.stack((ax, ay, az), axis=1), thrust, np.stack(q, axis=1), np.stack(omega, axis=1), yaw, yaw_rate,
+            st.eta1, st.eta2, st.xi1, st.xi2, st.phi1, st.phi2, lam, dist,
+            res.tangential, res.transversal, tilt, thrust_sat, res.approach_speed, eta2_ref, finite,
+        )  # fmt: skip
