@@ -118,7 +118,7 @@ class ModeWatch:
         """Whose mode a HEARTBEAT shows while we may be in control: ours, the autopilot's failsafe
         (system status CRITICAL / EMERGENCY, or a return / land mode we did not ask for), or the
         operator's (any other mode we did not ask for)."""
-        if not self.in_control() or self.mode_is_ours(msg.custom_mode) or self.tracker.is_ours(int(msg.custom_mode)):
+        if not self.in_control() or self.tracker.is_ours(int(msg.custom_mode)):
             return ModeChange.OURS
         if msg.system_status >= MAV_STATE_CRITICAL or msg.custom_mode in self.profile.failsafe_custom_modes:
             return ModeChange.FAILSAFE

@@ -116,8 +116,11 @@ class ModeTracker:
         return ""
 
     def is_ours(self, mode: int) -> bool:
-        """A mode we asked for (pending, confirmed, unresolved) or started from."""
-        modes = [self.start_mode, *self.unresolved, *self.asked]
+        """A mode we asked for (pending, confirmed, unresolved), or the one we started from until a
+        request of ours has been confirmed (afterwards a switch back to it is someone else's: the
+        operator's, or the autopilot's failsafe hold)."""
+        start = self.start_mode if self.confirmed is None else None
+        modes = [start, *self.unresolved, *self.asked]
         if self.pending is not None:
             modes.append(self.pending.mode)
         if self.confirmed is not None:
@@ -193,9 +196,9 @@ class ModeTracker:
         if asked:
             return False
         if seen.system_status in (MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY) and not (
-            self.start_mode is not None and self._same(seen.mode, self.start_mode)
+            self.confirmed is None and self.start_mode is not None and self._same(seen.mode, self.start_mode)
         ):
-            return True
+            return True  # e.g. PX4's failsafe hold (AUTO.LOITER, CRITICAL) before its LAND / Return
         return any(self._same(seen.mode, m) for m in self.failsafe_modes)
 
     def _yield(self, owner: Owner, reason: str) -> None:

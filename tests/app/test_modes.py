@@ -156,3 +156,20 @@ def test_random_timings_never_confirm_without_newer_evidence_nor_override_a_fail
     assert sent_when_forbidden == 0
     if must_not_send:
         assert not t.request(LOITER, now + 1.0) and not t.request(OFFBOARD, now + 1.0)
+
+
+def test_a_switch_back_to_the_start_mode_after_a_confirmed_request_is_not_ours() -> None:
+    """Measured on PX4 SIH: a battery failsafe first holds (AUTO.LOITER, system status CRITICAL) for
+    COM_FAIL_ACT_T, then lands. The hold is the failsafe's, not ours, once OFFBOARD was confirmed;
+    without CRITICAL, a switch back to it is the operator's."""
+    t = tracker()
+    t.on_heartbeat(LOITER, ACTIVE, 0.0)
+    t.request(OFFBOARD, 0.1)
+    assert t.on_heartbeat(LOITER, ACTIVE, 0.3) is Event.NONE  # before the confirmation: still ours
+    assert t.on_heartbeat(OFFBOARD, ACTIVE, 0.7) is Event.CONFIRMED
+    assert t.on_heartbeat(LOITER, MAV_STATE_CRITICAL, 9.0) is Event.FAILSAFE and t.owner is Owner.AUTOPILOT
+    t2 = tracker()
+    t2.on_heartbeat(LOITER, ACTIVE, 0.0)
+    t2.request(OFFBOARD, 0.1)
+    t2.on_heartbeat(OFFBOARD, ACTIVE, 0.7)
+    assert t2.on_heartbeat(LOITER, ACTIVE, 9.0) is Event.OPERATOR
