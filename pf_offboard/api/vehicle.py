@@ -200,8 +200,10 @@ class Vehicle:
         self._tasks: list[asyncio.Task[Any]] = []
         self._closed = True
         self._last_progress = Progress("idle", "?", False)
+        self._offboard_ours = False  # OFFBOARD / GUIDED left on by our previous flight (ArduPilot after a take-off)
 
     # ------------------------------------------------------------------ connection
+
     async def __aenter__(self) -> Vehicle:
         await self.open()
         return self
@@ -270,6 +272,8 @@ class Vehicle:
         modes, commander, waiter = self._idle
         kind = msg.get_type()
         if kind == "HEARTBEAT" and msg.get_srcComponent() == self.target.component:
+            if self._last_heartbeat is not None and msg.custom_mode != self._last_heartbeat.custom_mode:
+                self._offboard_ours = False  # someone changed the mode since our flight left it
             self._last_heartbeat = msg
             modes.record(msg)
             waiter.notify()
@@ -449,6 +453,9 @@ class Vehicle:
             summary=summary, log_dir=log_dir, breach=result.breach, breach_time_s=result.breach_time_s,
             link_counters=self.link.counters, estimator=flight.pipeline.estimator, config=config, flight=flight,
         )  # fmt: skip
+        # ArduPilot holds in GUIDED after a take-off: the next follow on this connection may engage
+        # at once (any mode change seen between flights clears it: _dispatch)
+        self._offboard_ours = flight.left_in_offboard
         if fr.exit_code == 0:
             return fr
         raise self._error_for(flight, fr)
@@ -552,6 +559,7 @@ class Vehicle:
                 ready_timeout_s=settings.ready_timeout_s,
                 takeoff_timeout_s=settings.takeoff_timeout_s,
                 follow=not takeoff_only,
+                offboard_ours=self._offboard_ours,
             )
             encoder = Encoder(
                 fs.output_mode, profile, target.system, target.component,

@@ -66,6 +66,32 @@ class ModeChange(enum.Enum):
     OPERATOR = "operator"  # another mode: the operator (RC / ground station) took over
 
 
+class EvidenceClock:
+    """The clock mode evidence is judged on: monotonic seconds that advance as fast as the faster of
+    the wall clock and the vehicle's own clock. On a real autopilot the two run together; a
+    lockstep simulator runs ahead of the wall (it handles a request at once, and 0.5 s of wall time
+    can be many seconds of its flight), so waiting on the wall alone would let the simulated flight
+    run on. A jump of the vehicle's clock (a reboot, a spoofed timestamp) counts for at most
+    ``max_vehicle_step_s`` per reading, never enough to confirm a request by itself."""
+
+    def __init__(self, wall: Callable[[], float], vehicle: Callable[[], float | None], max_vehicle_step_s: float = 0.25) -> None:
+        self.wall = wall
+        self.vehicle = vehicle
+        self.max_vehicle_step_s = max_vehicle_step_s
+        self._wall_s = wall()
+        self._vehicle_s = vehicle()
+        self._now_s = self._wall_s
+
+    def __call__(self) -> float:
+        wall_s, vehicle_s = self.wall(), self.vehicle()
+        dv = 0.0
+        if vehicle_s is not None and self._vehicle_s is not None:
+            dv = min(max(vehicle_s - self._vehicle_s, 0.0), self.max_vehicle_step_s)
+        self._now_s += max(wall_s - self._wall_s, dv, 0.0)
+        self._wall_s, self._vehicle_s = wall_s, vehicle_s if vehicle_s is not None else self._vehicle_s
+        return self._now_s
+
+
 class ModeWatch:
     """The autopilot's mode and armed state as its HEARTBEATs report them, and our modes.
 

@@ -28,7 +28,7 @@ from typing import Any, TextIO
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-from pf_offboard.app.commands import Commander, CommandRefusedError, CommandTiming, ModeChange, ModeWatch
+from pf_offboard.app.commands import Commander, CommandRefusedError, CommandTiming, EvidenceClock, ModeChange, ModeWatch
 from pf_offboard.app.dialects import Dialect, dialect_for
 from pf_offboard.app.encoders import position_setpoint, yaw_of
 from pf_offboard.app.estimator import StateEstimate, flight_clock_s
@@ -76,6 +76,9 @@ class FlightOptions:
     takeoff_timeout_s: float | None = None  # None: 30 s + 5 s per metre of take-off height
     progress_every_s: float = 5.0  # while waiting for readiness: one progress line this often (wall clock)
     follow: bool = True  # False: take off only, then hand back (the launch must be "takeoff")
+    # the vehicle is in OFFBOARD / GUIDED because this connection's previous flight left it there
+    # (ArduPilot holds in GUIDED after a take-off): an airborne launch engages at once, not refused
+    offboard_ours: bool = False
 
 
 class Flight:
@@ -109,9 +112,14 @@ class Flight:
         self.clock = clock
         self.phase = Phase.PREFLIGHT
         self.status_hook: Callable[[str, Any], str] | None = None
+        self.left_in_offboard = False  # ended holding in OFFBOARD / GUIDED by our request (see FlightOptions.offboard_ours)
         self.display = StatusDisplay(status_stream if status_stream is not None else sys.stderr, options.status, clock)
         self.waiter = Waiter(clock, lambda: self.phase in INTERRUPTING)
-        self.modes = ModeWatch(profile, clock)
+        def vehicle_time_s() -> float | None:
+            est = self.pipeline.estimator.latest
+            return flight_clock_s(est) if est is not None else None
+
+        self.modes = ModeWatch(profile, EvidenceClock(clock, vehicle_time_s))
         self.commander = Commander(
             link, self.modes, self.waiter, CommandTiming(options.command_timeout_s, options.progress_every_s),
             self.display.say, self.display.note, lambda: self.phase is Phase.TAKEN_OVER,
@@ -231,7 +239,7 @@ class Flight:
 
     async def _launch(self) -> None:
         opts = self.options
-        if opts.launch == "airborne" and self.modes.custom_mode is not None and not self._neutral_allowed():
+        if opts.launch == "airborne" and self.modes.custom_mode is not None and not self._neutral_allowed() and not opts.offboard_ours:
             self._refuse_foreign_offboard()  # before waiting for anything: nothing of ours may fly
             return
         ready_deadline = self.clock() + opts.ready_timeout_s
@@ -243,6 +251,7 @@ class Flight:
                 self._end_reason = f"take-off to {opts.height_m:g} m held"
                 if self.dialect.holds_in_offboard_after_takeoff:
                     self._last_setpoint = None
+                    self.left_in_offboard = True
                     self._finish(EXIT_OK, f"{self._end_reason}; holding in {self.profile.offboard.name}")
                     return
                 self.phase = Phase.HANDING_BACK
@@ -255,8 +264,11 @@ class Flight:
             if not self.modes.armed:
                 raise CommandRefusedError("--airborne: the vehicle is not armed (is it flying?)", mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, None)
             if not self._neutral_allowed():
-                self._refuse_foreign_offboard()
-                return
+                if not opts.offboard_ours:
+                    self._refuse_foreign_offboard()
+                    return
+                # left in OFFBOARD / GUIDED by our own previous flight: whatever we send flies at once
+                self._engage(f"activated (airborne, already in {self.profile.offboard.name})")
             else:
                 # stream the follower's setpoints (proof of life), then switch
                 self.phase = Phase.WAITING
