@@ -281,6 +281,7 @@ async def _fly(
     from pf_offboard.app.profiles import Autopilot, output_mode_refusal, select_profile
     from pf_offboard.control import controller_from_config
     from pf_offboard.logs.flightlog import FlightLog
+    from pf_offboard.logs.measures import path_tangent
     from pf_offboard.logs.summary import SummaryAccumulator
     from pf_offboard.safety import EnvelopeMonitor, SafetyConfig
 
@@ -322,6 +323,7 @@ async def _fly(
         launch = "takeoff" if args.takeoff is not None else "throw" if args.throw is not None else "airborne"
         height = args.takeoff if args.takeoff is not None else args.throw if args.throw is not None else math.nan
         path = follower.path
+        summary_acc.tangent = path_tangent(path)  # the speed along the path from the position
         options = BridgeOptions(
             launch=launch,
             height_m=height,

@@ -35,6 +35,7 @@ import numpy as np
 from pf_offboard.errors import InputError
 from pf_offboard.logs.flightlog import FlightLogPaths
 from pf_offboard.logs.steplog import StepRecord, read_steplog
+from pf_offboard.logs.measures import path_tangent
 from pf_offboard.logs.summary import FlightSummary, summarize
 from pf_offboard.logs.tlog import TlogEntry, read_tlog
 
@@ -347,7 +348,7 @@ def replay_flight(
         setpoint_max=setpoint_max,
         record_max=record_max,
         problems=tuple(problems),
-        summary=summarize(records),
+        summary=summarize(records, path_tangent(pipeline.follower.path)),
         profile=profile.name,
         output_mode=output_mode,
     )

@@ -1,0 +1,277 @@
+"""Fly the default config (a path and a speed) on the real autopilots in SITL and measure it.
+
+Each flight runs in its own network namespace (``unshare -n``, loopback only): a fresh SITL (PX4
+SIH from a private working directory, or ArduCopter SITL from a private directory), then
+``pf-offboard fly --takeoff 2`` as a user runs it, then the SITL is stopped. Figures from the step
+log with :mod:`pf_offboard.logs.measures` (speed along the path from the position's derivative,
+the estimator's beside it; window from activation + 8 s); on PX4 also against SIH's ground truth
+from the ULog PX4 wrote (:func:`pf_offboard.logs.truth.judge_truth`).
+
+    python scripts/real_sitl_campaign.py --out runs/baseline                 # everything
+    python scripts/real_sitl_campaign.py --autopilots px4 --paths helix --outputs acceleration
+    python scripts/real_sitl_campaign.py --app-python /work/venvs/other/bin/python --app-path /work/wt/other
+
+``--app-python`` / ``--app-path`` fly another checkout's app (its ``python -m pf_offboard``) while
+the measuring stays this one's. At most one PX4 and one ArduCopter fly at once.
+
+Environment: PF_OFFBOARD_PX4_SITL (PX4's build/px4_sitl_default, default /work/sitl/px4/...),
+PF_OFFBOARD_ARDUCOPTER (build/sitl/bin/arducopter, default /work/sitl/ardupilot/...).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import queue
+import shlex
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIG_DIR = REPO / "tests" / "real_sitl" / "configs"
+PX4_BUILD = Path(os.environ.get("PF_OFFBOARD_PX4_SITL", "/work/sitl/px4/build/px4_sitl_default"))
+ARDUCOPTER = Path(os.environ.get("PF_OFFBOARD_ARDUCOPTER", "/work/sitl/ardupilot/build/sitl/bin/arducopter"))
+OUTPUTS = {"px4": ("acceleration", "attitude", "rates"), "arducopter": ("attitude", "rates")}
+HOME = "-35.363261,149.165230,584,353"
+
+
+# ------------------------------------------------------------------------------------ SITL control
+def start_sitl(autopilot: str, workdir: Path, params: dict[str, float] | None = None) -> subprocess.Popen[bytes]:
+    """A fresh SITL in ``workdir`` (its own session; stop with :func:`stop_sitl`)."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    log = (workdir / f"{autopilot}.log").open("wb")
+    env = dict(os.environ)
+    if autopilot == "px4":
+        rootfs = workdir / "rootfs"
+        rootfs.mkdir(exist_ok=True)
+        env.update({"PX4_SIMULATOR": "sihsim", "PX4_SIM_MODEL": "sihsim_quadx", "HEADLESS": "1", "PX4_SIM_SPEED_FACTOR": "1"})
+        env.update({f"PX4_PARAM_{k}": str(v) for k, v in (params or {}).items()})
+        cmd = [str(PX4_BUILD / "bin" / "px4"), "-d", "-w", str(rootfs), str(PX4_BUILD / "etc")]
+    else:
+        parm = ARDUCOPTER.parents[3] / "Tools" / "autotest" / "default_params" / "copter.parm"
+        defaults = str(parm)
+        if params:
+            extra = workdir / "extra.parm"
+            extra.write_text("".join(f"{k} {v}\n" for k, v in params.items()))
+            defaults += "," + str(extra)
+        cmd = [str(ARDUCOPTER), "--model", "+", "--speedup", "1", "--defaults", defaults, "-I0", "--home", HOME, "-w"]
+    # a shell stays its parent: ArduCopter SITL exits when its parent process does
+    return subprocess.Popen(["bash", "-c", shlex.join(cmd) + "; true"], cwd=workdir, stdout=log, stderr=subprocess.STDOUT,
+                            start_new_session=True, env=env)  # fmt: skip
+
+
+def stop_sitl(proc: subprocess.Popen[bytes]) -> None:
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=15)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    except ProcessLookupError:
+        pass
+
+
+def connect_string(autopilot: str) -> str:
+    return "udpin:127.0.0.1:14540" if autopilot == "px4" else "tcp:127.0.0.1:5760"
+
+
+def fly_command(spec: dict[str, Any], log_dir: Path, config: Path) -> tuple[list[str], dict[str, str]]:
+    cmd = [spec.get("app_python") or sys.executable, "-m", "pf_offboard", "fly", "--connect", connect_string(spec["autopilot"]),
+           "--config", str(config), "--log-dir", str(log_dir), "--quiet", "--output", spec["output"], *spec.get("launch", ["--takeoff", "2"])]  # fmt: skip
+    if spec.get("laps"):
+        cmd += ["--laps", str(spec["laps"])]
+    if spec.get("duration"):
+        cmd += ["--duration", str(spec["duration"])]
+    if spec["autopilot"] == "arducopter":
+        cmd.append("--set-guid-options")
+    env = dict(os.environ)
+    if spec.get("app_path"):
+        env["PYTHONPATH"] = str(spec["app_path"])
+    return cmd, env
+
+
+# ------------------------------------------------------------------------------------ measuring
+def measure(log_dir: Path, config: Path, ulog: Path | None, settle_s: float = 8.0) -> dict[str, Any]:
+    """Figures of one flight (JSON-ready)."""
+    from pf_offboard.config import load_config
+    from pf_offboard.logs import measures
+    from pf_offboard.logs.steplog import read_steplog
+
+    path = load_config(config).path.spline()
+    recs = read_steplog(log_dir / "flight.csv")
+    track = measures.tracking_of_records(recs, measures.path_tangent(path), settle_s)
+    out: dict[str, Any] = {"tracking": None, "truth": None}
+    if track is None:
+        return out
+    out["tracking"] = {
+        "convergence_time_s": track.convergence_time_s,
+        "settled": None if track.settled is None else track.settled.to_dict(),
+        "whole": None if track.whole is None else track.whole.to_dict(),
+    }
+    if ulog is not None:
+        from pf_offboard.logs import truth
+
+        try:
+            t, ned = truth.read_ulog_truth(ulog)
+            out["truth"] = truth.judge_truth(recs, t, ned, path, settle_s).to_dict()
+        except Exception as exc:  # noqa: BLE001 - a report, not a gate
+            out["truth"] = {"error": f"{type(exc).__name__}: {exc}"}
+    return out
+
+
+def speed_profile_config(config: Path, max_speed_m_s: float, out: Path) -> Path:
+    import yaml
+
+    data = yaml.safe_load(config.read_text())
+    data["speed_profile"] = {"max_speed_m_s": max_speed_m_s}
+    target = out / f"{config.stem}-fast.yaml"
+    target.write_text(yaml.safe_dump(data, sort_keys=False))
+    return target
+
+
+def run_one(spec: dict[str, Any]) -> dict[str, Any]:
+    """One flight, in the current network namespace (the caller made it private)."""
+    work = Path(spec["workdir"])
+    work.mkdir(parents=True, exist_ok=True)
+    for old in ("log", "sitl"):  # a fresh flight
+        subprocess.run(["rm", "-rf", str(work / old)], check=False)
+    config = Path(spec["config"])
+    if spec.get("max_speed_m_s"):
+        config = speed_profile_config(config, float(spec["max_speed_m_s"]), work)
+    log_dir = work / "log"
+    sitl = start_sitl(spec["autopilot"], work / "sitl", spec.get("params"))
+    result: dict[str, Any] = {"spec": spec}
+    t0 = time.monotonic()
+    try:
+        if spec.get("before_fly"):
+            before_fly(spec)
+        cmd, env = fly_command(spec, log_dir, config)
+        proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=spec.get("timeout_s", 420))
+        result.update(exit_code=proc.returncode, stdout=proc.stdout[-4000:], stderr=proc.stderr[-4000:])
+    except subprocess.TimeoutExpired as exc:
+        result.update(exit_code=None, stderr=f"timeout: {exc}")
+    finally:
+        stop_sitl(sitl)
+    result["wall_s"] = time.monotonic() - t0
+    if (log_dir / "flight.csv").exists():
+        from pf_offboard.logs.truth import find_ulog
+
+        ulog = find_ulog(work / "sitl") if spec["autopilot"] == "px4" else None
+        result["ulog"] = None if ulog is None else str(ulog)
+        try:
+            result.update(measure(log_dir, config, ulog))
+        except Exception as exc:  # noqa: BLE001
+            result["measure_error"] = f"{type(exc).__name__}: {exc}"
+    (work / "result.json").write_text(json.dumps(result, indent=2, default=float))
+    return result
+
+
+def before_fly(spec: dict[str, Any]) -> None:
+    """Hook for launches that need the SITL prepared first (the throw campaign sets it)."""
+
+
+# ------------------------------------------------------------------------------------ the campaign
+def in_namespace(spec_file: Path) -> list[str]:
+    inner = f"ip link set lo up && exec {shlex.quote(sys.executable)} {shlex.quote(str(Path(__file__).resolve()))} --one {shlex.quote(str(spec_file))}"
+    return ["unshare", "-n", "bash", "-c", inner]
+
+
+def row(result: dict[str, Any]) -> str:
+    spec = result["spec"]
+    tr = result.get("tracking") or {}
+    s = tr.get("settled") or {}
+    cm = lambda x: "  n/a" if x is None else f"{100 * x:5.1f}"  # noqa: E731
+    line = (f"{spec['autopilot']:10s} {Path(spec['config']).stem:15s} {spec['output']:12s} "
+            f"{'v<=' + str(spec['max_speed_m_s']) if spec.get('max_speed_m_s') else 'v=1.5':7s} exit {result.get('exit_code')!s:4s} "
+            f"ct RMS {cm(s.get('cross_track_rms_m'))} max {cm(s.get('cross_track_max_m'))} cm | speed err RMS {cm(s.get('speed_error_rms_m_s'))} "
+            f"mean {cm(s.get('speed_error_mean_m_s'))} cm/s (est {cm(s.get('estimator_speed_error_rms_m_s'))}) | mean speed "
+            f"{s.get('speed_mean_m_s') or math.nan:.2f} m/s | conv {tr.get('convergence_time_s')}")  # fmt: skip
+    t = result.get("truth")
+    if t and "error" not in t:
+        w = t.get("truth") or {}
+        line += (f"\n{'':38s}truth: ct RMS {cm(w.get('cross_track_rms_m'))} max {cm(w.get('cross_track_max_m'))} cm, speed err RMS "
+                 f"{cm(w.get('speed_error_rms_m_s'))} cm/s; EKF2 err RMS N,E,D {', '.join(cm(x) for x in t['estimate_error_rms_ned_m'])} cm "
+                 f"(horiz {cm(t['estimate_error_rms_horizontal_m'])}); offset N,E,D {', '.join(cm(x) for x in t['frame_offset_ned_m'])} cm; "
+                 f"raw truth ct RMS {cm(t['truth_raw_cross_track_rms_m'])}")  # fmt: skip
+    elif t:
+        line += f"\n{'':38s}truth: {t['error']}"
+    if result.get("exit_code") != 0:
+        line += f"\n{'':38s}{(result.get('stderr') or '').strip().splitlines()[-1:] }"
+    return line
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    ap.add_argument("--one", type=Path, help=argparse.SUPPRESS)
+    ap.add_argument("--out", type=Path, default=Path("runs") / time.strftime("campaign-%Y%m%dT%H%M%S"))
+    ap.add_argument("--autopilots", default="px4,arducopter")
+    ap.add_argument("--paths", default="figure8-tilted,helix,racetrack", help=f"config names in {CONFIG_DIR} or YAML files")
+    ap.add_argument("--outputs", help="default: every mode the autopilot allows")
+    ap.add_argument("--speeds", default="1.5,3.0", help="1.5: the config's speed; anything else: speed_profile.max_speed_m_s")
+    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--app-python", help="python that runs the app (default: this one)")
+    ap.add_argument("--app-path", help="PYTHONPATH for the app (another checkout)")
+    args = ap.parse_args(argv)
+    if args.one:
+        run_one(json.loads(args.one.read_text()))
+        return 0
+    args.out.mkdir(parents=True, exist_ok=True)
+    queues: dict[str, queue.Queue[dict[str, Any]]] = {}
+    specs = []
+    for rep in range(args.repeat):
+        for speed in (float(s) for s in args.speeds.split(",")):
+            for name in args.paths.split(","):
+                config = Path(name) if name.endswith(".yaml") else CONFIG_DIR / f"{name}.yaml"
+                for autopilot in args.autopilots.split(","):
+                    for output in (args.outputs.split(",") if args.outputs else OUTPUTS[autopilot]):
+                        if output not in OUTPUTS[autopilot]:
+                            continue
+                        tag = f"{autopilot}-{config.stem}-{output}-v{speed:g}-{rep}"
+                        closed = "closed: false" not in config.read_text()
+                        specs.append({"autopilot": autopilot, "config": str(config.resolve()), "output": output,
+                                      "max_speed_m_s": None if speed == 1.5 else speed, "laps": 3 if closed else 1,
+                                      "workdir": str((args.out / tag).resolve()), "app_python": args.app_python,
+                                      "app_path": args.app_path})  # fmt: skip
+    for spec in specs:
+        queues.setdefault(spec["autopilot"], queue.Queue()).put(spec)
+    lock = threading.Lock()
+    results: list[dict[str, Any]] = []
+
+    def worker(q: queue.Queue[dict[str, Any]]) -> None:
+        while True:
+            try:
+                spec = q.get_nowait()
+            except queue.Empty:
+                return
+            work = Path(spec["workdir"])
+            work.mkdir(parents=True, exist_ok=True)
+            res_file = work / "result.json"
+            done = json.loads(res_file.read_text()) if res_file.exists() else None
+            if not (done and done.get("exit_code") == 0):
+                res_file.unlink(missing_ok=True)
+                (work / "spec.json").write_text(json.dumps(spec))
+                subprocess.run(in_namespace(work / "spec.json"), check=False)
+            res = json.loads(res_file.read_text()) if res_file.exists() else {"spec": spec, "exit_code": "crashed"}
+            with lock:
+                results.append(res)
+                print(row(res), flush=True)
+
+    threads = [threading.Thread(target=worker, args=(q,)) for q in queues.values()]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    (args.out / "results.json").write_text(json.dumps(results, indent=2, default=float))
+    print(f"\n{len(results)} flights; results in {args.out / 'results.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
