@@ -153,7 +153,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         if spec.get("before_fly"):
             before_fly(spec)
         cmd, env = fly_command(spec, log_dir, config)
-        proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=spec.get("timeout_s", 420))
+        proc = subprocess.run(cmd, env=env, cwd=work, capture_output=True, text=True, timeout=spec.get("timeout_s", 300))
         result.update(exit_code=proc.returncode, stdout=proc.stdout[-4000:], stderr=proc.stderr[-4000:])
     except subprocess.TimeoutExpired as exc:
         result.update(exit_code=None, stderr=f"timeout: {exc}")
