@@ -149,16 +149,29 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     sitl = start_sitl(spec["autopilot"], work / "sitl", spec.get("params"))
     result: dict[str, Any] = {"spec": spec}
     t0 = time.monotonic()
+    launch_log = (work / "launch.log").open("w")
     try:
-        if spec.get("before_fly"):
-            before_fly(spec)
         cmd, env = fly_command(spec, log_dir, config)
-        proc = subprocess.run(cmd, env=env, cwd=work, capture_output=True, text=True, timeout=spec.get("timeout_s", 300))
-        result.update(exit_code=proc.returncode, stdout=proc.stdout[-4000:], stderr=proc.stderr[-4000:])
+        if spec.get("fast_start"):
+            px4_fast_start(spec, launch_log)
+        fly = subprocess.Popen(cmd, env=env, cwd=work, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        if spec.get("throw"):
+            time.sleep(1.0)  # the app holds SERIAL0 (ArduCopter's clock starts with its first client)
+            arducopter_throw(spec, launch_log)
+        out, err = fly.communicate(timeout=spec.get("timeout_s", 300))
+        result.update(exit_code=fly.returncode, stdout=out[-4000:], stderr=err[-4000:])
     except subprocess.TimeoutExpired as exc:
+        fly.kill()
         result.update(exit_code=None, stderr=f"timeout: {exc}")
+    except Exception as exc:  # noqa: BLE001 - a launch that failed is a result too
+        result.update(exit_code=None, stderr=f"launch: {type(exc).__name__}: {exc}")
+        try:
+            fly.kill()
+        except Exception:  # noqa: BLE001
+            pass
     finally:
         stop_sitl(sitl)
+        launch_log.close()
     result["wall_s"] = time.monotonic() - t0
     if (log_dir / "flight.csv").exists():
         from pf_offboard.logs.truth import find_ulog
@@ -173,8 +186,133 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     return result
 
 
-def before_fly(spec: dict[str, Any]) -> None:
-    """Hook for launches that need the SITL prepared first (the throw campaign sets it)."""
+# ------------------------------------------------------------------------------------ launches
+def _gcs(url: str, timeout_s: float = 60.0) -> Any:
+    """A ground-station link (system 255) that has heard the autopilot."""
+    from pymavlink import mavutil
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            m = mavutil.mavlink_connection(url, source_system=255, source_component=190, autoreconnect=True)
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.5)
+    if m.wait_heartbeat(timeout=timeout_s) is None:
+        raise RuntimeError(f"no HEARTBEAT on {url}")
+    return m
+
+
+def _command(m: Any, cmd: int, *params: float, want: int = 0, timeout_s: float = 3.0) -> int:
+    p = [*params, *([0.0] * (7 - len(params)))]
+    m.mav.command_long_send(m.target_system, m.target_component, cmd, 0, *p)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        ack = m.recv_match(type="COMMAND_ACK", blocking=True, timeout=0.5)
+        if ack is not None and ack.command == cmd:
+            return int(ack.result)
+    return -1
+
+
+def _set_param(m: Any, name: str, value: float) -> None:
+    from pymavlink import mavutil
+
+    m.mav.param_set_send(m.target_system, m.target_component, name.encode(), float(value), mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
+    time.sleep(0.2)
+
+
+def _until(pred: Any, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if pred():
+            return
+        time.sleep(0.1)
+    raise RuntimeError(f"timed out: {what}")
+
+
+def arducopter_throw(spec: dict[str, Any], log: Any) -> None:
+    """On the GCS port: THROW mode, arm (retried until the EKF is ready), then the shove."""
+    from pymavlink import mavutil
+
+    th = spec["throw"]
+    m = _gcs("tcp:127.0.0.1:5762")
+    m.mav.request_data_stream_send(m.target_system, m.target_component, mavutil.mavlink.MAV_DATA_STREAM_ALL, 10, 1)
+    for k, v in th.get("params", {}).items():
+        _set_param(m, k, v)
+    deadline = time.monotonic() + 150
+    while True:
+        m.mav.set_mode_send(m.target_system, mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 18)  # THROW
+        time.sleep(0.3)
+        if _command(m, mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == 0:
+            break
+        if time.monotonic() > deadline:
+            raise RuntimeError("ArduCopter did not arm in THROW mode")
+        time.sleep(2.0)
+    print(f"armed in THROW at {time.strftime('%H:%M:%S')}", file=log, flush=True)
+    time.sleep(2.0)
+    for axis in ("X", "Y", "Z"):
+        _set_param(m, f"SIM_SHOVE_{axis}", th.get(axis.lower(), 0.0))
+    _set_param(m, "SIM_SHOVE_TIME", th["ms"])
+    print(f"shoved {th}", file=log, flush=True)
+    t_end = time.monotonic() + 5.0
+    while time.monotonic() < t_end:  # the autopilot's own account of the throw
+        msg = m.recv_match(type="STATUSTEXT", blocking=True, timeout=0.5)
+        if msg is not None:
+            print(f"{time.monotonic():.2f} autopilot: {msg.text}", file=log, flush=True)
+    m.close()
+
+
+def px4_fast_start(spec: dict[str, Any], log: Any) -> None:
+    """On PX4's GCS link: take off, then a reposition far away at cruise speed; returns once the
+    vehicle is ``min_distance_m`` from home moving faster than ``min_speed_m_s``."""
+    from pymavlink import mavutil
+
+    fs = spec["fast_start"]
+    m = _gcs("udpin:127.0.0.1:14550")
+    state: dict[str, Any] = {}
+
+    def pump() -> None:
+        while True:
+            msg = m.recv_match(blocking=False)
+            if msg is None:
+                return
+            state[msg.get_type()] = msg
+
+    def ok_arm() -> bool:
+        pump()
+        return _command(m, mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == 0
+
+    _until(ok_arm, 90, "PX4 arming")
+    _command(m, mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
+
+    def alt() -> float:
+        pump()
+        lp = state.get("LOCAL_POSITION_NED")
+        return -lp.z if lp is not None else 0.0
+
+    _until(lambda: alt() > 2.0, 60, "take-off")
+    time.sleep(3.0)
+    pump()
+    home = state.get("GLOBAL_POSITION_INT")
+    lat, lon = home.lat * 1e-7, home.lon * 1e-7
+    north, east = fs["north_m"], fs["east_m"]
+    tlat = lat + north / 6371000.0 * 180 / math.pi
+    tlon = lon + east / (6371000.0 * math.cos(math.radians(lat))) * 180 / math.pi
+    m.mav.command_int_send(m.target_system, m.target_component, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                           mavutil.mavlink.MAV_CMD_DO_REPOSITION, 0, 0, fs.get("speed_m_s", -1), 1, 0, math.nan,
+                           int(tlat * 1e7), int(tlon * 1e7), fs.get("alt_m", 2.5))  # fmt: skip
+
+    def far_and_fast() -> bool:
+        pump()
+        lp = state.get("LOCAL_POSITION_NED")
+        return lp is not None and math.hypot(lp.x, lp.y) >= fs["min_distance_m"] and math.hypot(lp.vx, lp.vy) >= fs["min_speed_m_s"]
+
+    _until(far_and_fast, 30, "moving fast, away from the path")
+    lp = state["LOCAL_POSITION_NED"]
+    print(f"engage: at N {lp.x:.2f} E {lp.y:.2f} D {lp.z:.2f} moving {lp.vx:.2f} {lp.vy:.2f} {lp.vz:.2f} m/s", file=log, flush=True)
+    m.close()
 
 
 # ------------------------------------------------------------------------------------ the campaign
@@ -218,6 +356,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--app-python", help="python that runs the app (default: this one)")
     ap.add_argument("--app-path", help="PYTHONPATH for the app (another checkout)")
+    ap.add_argument("--px4-param", action="append", default=[], metavar="NAME=VALUE", help="a PX4 parameter for every PX4 flight")
+    ap.add_argument("--tag", default="", help="appended to each flight's directory name")
     args = ap.parse_args(argv)
     if args.one:
         run_one(json.loads(args.one.read_text()))
@@ -233,12 +373,13 @@ def main(argv: list[str] | None = None) -> int:
                     for output in (args.outputs.split(",") if args.outputs else OUTPUTS[autopilot]):
                         if output not in OUTPUTS[autopilot]:
                             continue
-                        tag = f"{autopilot}-{config.stem}-{output}-v{speed:g}-{rep}"
+                        tag = f"{autopilot}-{config.stem}-{output}-v{speed:g}-{rep}{args.tag}"
                         closed = "closed: false" not in config.read_text()
                         specs.append({"autopilot": autopilot, "config": str(config.resolve()), "output": output,
                                       "max_speed_m_s": None if speed == 1.5 else speed, "laps": 3 if closed else 1,
                                       "workdir": str((args.out / tag).resolve()), "app_python": args.app_python,
-                                      "app_path": args.app_path})  # fmt: skip
+                                      "app_path": args.app_path,
+                                      "params": dict(kv.split("=", 1) for kv in args.px4_param) if autopilot == "px4" else None})  # fmt: skip
     for spec in specs:
         queues.setdefault(spec["autopilot"], queue.Queue()).put(spec)
     lock = threading.Lock()

@@ -69,4 +69,4 @@ def test_the_sim_command_flies_the_same_flight(tmp_path: Path) -> None:
     sim_cli.add_arguments(parser)
     assert sim_cli.run(parser.parse_args([*argv[2:-2], "--out", str(tmp_path), "--json"])) == 0
     flown = json.loads((tmp_path / SUMMARY_JSON).read_text())
-    assert flown["summary"]["whole_cross_track_max_m"] == row["cross_track_max_m"]
+    assert flown["summary"]["whole_flight"]["cross_track_max_m"] == row["cross_track_max_m"]
