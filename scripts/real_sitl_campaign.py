@@ -106,8 +106,20 @@ def measure(log_dir: Path, config: Path, ulog: Path | None, settle_s: float = 8.
 
     path = load_config(config).path.spline()
     recs = read_steplog(log_dir / "flight.csv")
-    track = measures.tracking_of_records(recs, measures.path_tangent(path), settle_s)
     out: dict[str, Any] = {"tracking": None, "truth": None}
+    if not path.closed:
+        # an open path: the figures up to the first step at its end; what the vehicle did after
+        # it (it flies on at the path speed until it stops) is reported apart
+        import numpy as np
+
+        at_end = [i for i, r in enumerate(recs) if r.active and r.lam >= path.lam_max - 1e-6]
+        if at_end:
+            after = recs[at_end[0]:]
+            out["past_the_end"] = {"cross_track_max_m": max(r.cross_track_m for r in after),
+                                   "duration_s": after[-1].time_s - after[0].time_s,
+                                   "overshoot_m": float(max(np.linalg.norm(np.subtract(r.position_enu_m, path.eval_floats(path.lam_max)[0:3])) for r in after))}  # fmt: skip
+            recs = recs[: at_end[0]]
+    track = measures.tracking_of_records(recs, measures.path_tangent(path), settle_s)
     if track is None:
         return out
     out["tracking"] = {
@@ -331,6 +343,9 @@ def row(result: dict[str, Any]) -> str:
             f"ct RMS {cm(s.get('cross_track_rms_m'))} max {cm(s.get('cross_track_max_m'))} cm | speed err RMS {cm(s.get('speed_error_rms_m_s'))} "
             f"mean {cm(s.get('speed_error_mean_m_s'))} cm/s (est {cm(s.get('estimator_speed_error_rms_m_s'))}) | mean speed "
             f"{s.get('speed_mean_m_s') or math.nan:.2f} m/s | conv {tr.get('convergence_time_s')}")  # fmt: skip
+    if result.get("past_the_end"):
+        pe = result["past_the_end"]
+        line += f"\n{'':38s}(window ends at the open path's end; after it: overshoot {cm(pe['overshoot_m'])} cm, cross-track max {cm(pe['cross_track_max_m'])} cm over {pe['duration_s']:.1f} s)"
     t = result.get("truth")
     if t and "error" not in t:
         w = t.get("truth") or {}
@@ -358,7 +373,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--app-path", help="PYTHONPATH for the app (another checkout)")
     ap.add_argument("--px4-param", action="append", default=[], metavar="NAME=VALUE", help="a PX4 parameter for every PX4 flight")
     ap.add_argument("--tag", default="", help="appended to each flight's directory name")
+    ap.add_argument("--report", type=Path, metavar="DIR", help="measure the flights under DIR again and print them (no flying)")
     args = ap.parse_args(argv)
+    if args.report:
+        from pf_offboard.logs.truth import find_ulog
+
+        for res_file in sorted(args.report.glob("*/result.json")):
+            res = json.loads(res_file.read_text())
+            work = res_file.parent
+            if (work / "log" / "flight.csv").exists():
+                config = Path(res["spec"]["config"])
+                fast = work / f"{config.stem}-fast.yaml"
+                ulog = find_ulog(work / "sitl") if res["spec"]["autopilot"] == "px4" else None
+                res.update(measure(work / "log", fast if fast.exists() else config, ulog))
+                res_file.write_text(json.dumps(res, indent=2, default=float))
+            print(row(res))
+        return 0
     if args.one:
         run_one(json.loads(args.one.read_text()))
         return 0
