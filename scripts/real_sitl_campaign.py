@@ -327,6 +327,58 @@ def px4_fast_start(spec: dict[str, Any], log: Any) -> None:
     m.close()
 
 
+# Thrown starts on ArduCopter SITL (SIM_SHOVE_*: m/s^2 in the body frame, ~ north/east/down on the
+# ground at the default home heading, for SIM_SHOVE_TIME ms) and fast off-path starts on PX4 SIH
+# (a reposition at cruise speed away from the path, engaged on the way).
+THROWS: tuple[dict[str, float], ...] = (
+    {"z": -25.0, "ms": 300},  # straight up, 4.5 m/s
+    {"x": 12.0, "z": -25.0, "ms": 300},  # north, 3.6 m/s sideways
+    {"y": 12.0, "z": -25.0, "ms": 300},  # east
+    {"x": -9.0, "y": -9.0, "z": -25.0, "ms": 300},  # south-west, 3.8 m/s sideways
+    {"x": -13.0, "y": 4.0, "z": -28.0, "ms": 300},  # south, fast: 4.1 m/s sideways, 5.4 up
+)
+FAST_STARTS: tuple[dict[str, float], ...] = (
+    {"north_m": 30.0, "east_m": 0.0, "min_distance_m": 4.0, "min_speed_m_s": 3.0},
+    {"north_m": -20.0, "east_m": 20.0, "min_distance_m": 4.0, "min_speed_m_s": 3.0},
+    {"north_m": 0.0, "east_m": -30.0, "min_distance_m": 5.0, "min_speed_m_s": 4.0},
+)
+
+
+def throw_spec(throw: dict[str, float], workdir: Path, config: Path, height_m: float = 1.5, output: str = "attitude") -> dict[str, Any]:
+    return {"autopilot": "arducopter", "config": str(config), "output": output, "launch": ["--throw", str(height_m)],
+            "duration": 10, "workdir": str(workdir), "throw": {**throw}}  # fmt: skip
+
+
+def fast_start_spec(fast: dict[str, float], workdir: Path, config: Path, output: str = "acceleration") -> dict[str, Any]:
+    return {"autopilot": "px4", "config": str(config), "output": output, "launch": ["--airborne"], "duration": 10,
+            "workdir": str(workdir), "fast_start": {**fast}}  # fmt: skip
+
+
+def start_figures(result: dict[str, Any]) -> str:
+    """Activation, convergence (<= 10 cm for 1 s) and the flight after it, from the step log."""
+    from pf_offboard.config import load_config
+    from pf_offboard.logs import measures
+    from pf_offboard.logs.steplog import read_steplog
+
+    work = Path(result["spec"]["workdir"])
+    if not (work / "log" / "flight.csv").exists():
+        return "no step log"
+    recs = read_steplog(work / "log" / "flight.csv")
+    act = [r for r in recs if r.active]
+    if not act:
+        return "never activated"
+    a = act[0]
+    speed = float(sum(v * v for v in a.velocity_enu_m_s) ** 0.5)
+    path = load_config(Path(result["spec"]["config"])).path.spline()
+    track = measures.tracking_of_records(recs, measures.path_tangent(path), settle_s=3.0)
+    conv = None if track is None else track.convergence_time_s
+    after = [r.cross_track_m for r in act if conv is not None and r.time_s >= a.time_s + conv]
+    return (f"activated at {a.position_enu_m[2]:.2f} m up, {a.cross_track_m:.2f} m off the path, moving {speed:.2f} m/s; "
+            f"converged (<= 10 cm for 1 s) {'never' if conv is None else f'{conv:.2f} s'} after activation; then cross-track max "
+            f"{100 * max(after) if after else float('nan'):.1f} cm; from activation + 3 s: "
+            f"{'n/a' if track is None or track.settled is None else track.settled.line()}")  # fmt: skip
+
+
 # ------------------------------------------------------------------------------------ the campaign
 def in_namespace(spec_file: Path) -> list[str]:
     inner = f"ip link set lo up && exec {shlex.quote(sys.executable)} {shlex.quote(str(Path(__file__).resolve()))} --one {shlex.quote(str(spec_file))}"
@@ -373,6 +425,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--app-path", help="PYTHONPATH for the app (another checkout)")
     ap.add_argument("--px4-param", action="append", default=[], metavar="NAME=VALUE", help="a PX4 parameter for every PX4 flight")
     ap.add_argument("--tag", default="", help="appended to each flight's directory name")
+    ap.add_argument("--starts", action="store_true", help="the thrown starts (ArduCopter) and fast off-path starts (PX4) instead")
     ap.add_argument("--report", type=Path, metavar="DIR", help="measure the flights under DIR again and print them (no flying)")
     args = ap.parse_args(argv)
     if args.report:
@@ -391,6 +444,31 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.one:
         run_one(json.loads(args.one.read_text()))
+        return 0
+    if args.starts:
+        args.out.mkdir(parents=True, exist_ok=True)
+        jobs: dict[str, list[dict[str, Any]]] = {"arducopter": [], "px4": []}
+        for i, th in enumerate(THROWS):
+            jobs["arducopter"].append(throw_spec(th, (args.out / f"throw-{i}").resolve(), CONFIG_DIR / "figure8-tilted.yaml"))
+        for i, fs in enumerate(FAST_STARTS):
+            jobs["px4"].append(fast_start_spec(fs, (args.out / f"fast-start-{i}").resolve(), CONFIG_DIR / "racetrack.yaml"))
+
+        def start_worker(specs: list[dict[str, Any]]) -> None:
+            for spec in specs:
+                work = Path(spec["workdir"])
+                work.mkdir(parents=True, exist_ok=True)
+                (work / "spec.json").write_text(json.dumps(spec))
+                subprocess.run(in_namespace(work / "spec.json"), check=False)
+                res = json.loads((work / "result.json").read_text()) if (work / "result.json").exists() else {"spec": spec}
+                print(f"{work.name}: exit {res.get('exit_code')}; {start_figures(res)}", flush=True)
+                if res.get("exit_code") != 0:
+                    print(f"    {(res.get('stderr') or '').strip().splitlines()[-3:]}", flush=True)
+
+        threads = [threading.Thread(target=start_worker, args=(v,)) for k, v in jobs.items() if k in args.autopilots.split(",")]
+        for th in threads:
+            th.start()
+        for th in threads:
+            th.join()
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
     queues: dict[str, queue.Queue[dict[str, Any]]] = {}
