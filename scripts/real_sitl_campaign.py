@@ -408,7 +408,9 @@ def row(result: dict[str, Any]) -> str:
     elif t:
         line += f"\n{'':38s}truth: {t['error']}"
     if result.get("exit_code") != 0:
-        line += f"\n{'':38s}{(result.get('stderr') or '').strip().splitlines()[-1:] }"
+        err = (result.get("stderr") or "").strip().splitlines()
+        why = [x for x in err if x.startswith("pf-offboard fly:")] or err[-1:]
+        line += f"\n{'':38s}{why[-1] if why else ''}"
     return line
 
 
