@@ -330,12 +330,13 @@ def px4_fast_start(spec: dict[str, Any], log: Any) -> None:
 # Thrown starts on ArduCopter SITL (SIM_SHOVE_*: m/s^2 in the body frame, ~ north/east/down on the
 # ground at the default home heading, for SIM_SHOVE_TIME ms) and fast off-path starts on PX4 SIH
 # (a reposition at cruise speed away from the path, engaged on the way).
-THROWS: tuple[dict[str, float], ...] = (
-    {"z": -25.0, "ms": 300},  # straight up, 4.5 m/s
-    {"x": 12.0, "z": -25.0, "ms": 300},  # north, 3.6 m/s sideways
-    {"y": 12.0, "z": -25.0, "ms": 300},  # east
-    {"x": -9.0, "y": -9.0, "z": -25.0, "ms": 300},  # south-west, 3.8 m/s sideways
-    {"x": -13.0, "y": 4.0, "z": -28.0, "ms": 300},  # south, fast: 4.1 m/s sideways, 5.4 up
+MOTORS_IDLE = {"THROW_MOT_START": 1}  # the motors idle while armed in THROW mode (spool-up is then shorter)
+THROWS: tuple[dict[str, Any], ...] = (
+    {"z": -30.0, "ms": 300, "params": MOTORS_IDLE},  # straight up, 6 m/s
+    {"x": 12.0, "z": -30.0, "ms": 300, "params": MOTORS_IDLE},  # and north, 3.6 m/s sideways
+    {"y": 12.0, "z": -30.0, "ms": 300, "params": MOTORS_IDLE},  # east
+    {"x": -9.0, "y": -9.0, "z": -30.0, "ms": 300, "params": MOTORS_IDLE},  # south-west, 3.8 m/s sideways
+    {"x": -13.0, "y": 4.0, "z": -28.0, "ms": 300, "params": MOTORS_IDLE},  # south, 4.1 m/s sideways
 )
 FAST_STARTS: tuple[dict[str, float], ...] = (
     {"north_m": 30.0, "east_m": 0.0, "min_distance_m": 4.0, "min_speed_m_s": 3.0},
@@ -344,7 +345,7 @@ FAST_STARTS: tuple[dict[str, float], ...] = (
 )
 
 
-def throw_spec(throw: dict[str, float], workdir: Path, config: Path, height_m: float = 1.5, output: str = "attitude") -> dict[str, Any]:
+def throw_spec(throw: dict[str, Any], workdir: Path, config: Path, height_m: float = 1.8, output: str = "attitude") -> dict[str, Any]:
     return {"autopilot": "arducopter", "config": str(config), "output": output, "launch": ["--throw", str(height_m)],
             "duration": 10, "workdir": str(workdir), "throw": {**throw}}  # fmt: skip
 
@@ -451,7 +452,7 @@ def main(argv: list[str] | None = None) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         jobs: dict[str, list[dict[str, Any]]] = {"arducopter": [], "px4": []}
         for i, th in enumerate(THROWS):
-            jobs["arducopter"].append(throw_spec(th, (args.out / f"throw-{i}").resolve(), CONFIG_DIR / "figure8-tilted.yaml"))
+            jobs["arducopter"].append(throw_spec(th, (args.out / f"throw-{i}").resolve(), CONFIG_DIR / "racetrack.yaml"))
         for i, fs in enumerate(FAST_STARTS):
             jobs["px4"].append(fast_start_spec(fs, (args.out / f"fast-start-{i}").resolve(), CONFIG_DIR / "racetrack.yaml"))
 

@@ -29,6 +29,12 @@ CONVERGED_TOL_M = 0.10
 CONVERGED_HOLD_S = 1.0
 
 WINDOW_SETTLED = "from activation + 8 s"
+
+
+def settled_window(settle_s: float) -> str:
+    """The name of the window from activation + ``settle_s``."""
+    return f"from activation + {settle_s:g} s"
+
 WINDOW_WHOLE = "whole flight"
 CONVERGED_DEFINITION = f"first time the cross-track error stays <= {100 * CONVERGED_TOL_M:g} cm for {CONVERGED_HOLD_S:g} s"
 
@@ -216,7 +222,7 @@ def tracking(
         speed = np.full(len(t), math.nan)
     t_act = float(t[np.flatnonzero(act)[0]])
     conv = Convergence()
-    settled, whole = WindowSums(WINDOW_SETTLED, settle_s), WindowSums(WINDOW_WHOLE, 0.0)
+    settled, whole = WindowSums(settled_window(settle_s), settle_s), WindowSums(WINDOW_WHOLE, 0.0)
     for i in np.flatnonzero(act):
         ti = float(t[i])
         conv.add(ti, float(cross_track_m[i]))

@@ -39,6 +39,7 @@ from pf_offboard.logs.measures import (
     Tangent,
     WindowFigures,
     WindowSums,
+    settled_window,
 )
 from pf_offboard.logs.steplog import StepRecord
 
@@ -101,7 +102,7 @@ class FlightSummary:
             f"duration            {self.duration_s:.3f} s, {self.steps} steps ({self.active_steps} active)",
             f"activation          {f(self.activation_time_s, 's (vehicle time)')}",
             f"converged           {f(self.convergence_time_s, 's after activation', '.2f')} ({CONVERGED_DEFINITION})",
-            (self.settled.line() if self.settled is not None else f"{WINDOW_SETTLED}: n/a (the flight followed for less than {SETTLE_S:g} s)"),
+            (self.settled.line() if self.settled is not None else f"{WINDOW_SETTLED}: n/a (the flight followed for less than 8 s)"),
             (self.whole.line() if self.whole is not None else f"{WINDOW_WHOLE}: n/a (no active step)"),
             "saturation          " + ", ".join(f"{k.removeprefix('sat_')} {v:.2f} s" for k, v in self.saturation_s.items()),
         ]
@@ -140,7 +141,7 @@ class SummaryAccumulator:
         self.events_dropped = 0
         self._t_act: float | None = None
         self._conv = Convergence()
-        self._settled = WindowSums(WINDOW_SETTLED, settle_s)
+        self._settled = WindowSums(settled_window(settle_s), settle_s)
         self._whole = WindowSums(WINDOW_WHOLE, 0.0)
         # recent steps [time, position, active record or None, counted]: the ones waiting for their
         # +0.1 s neighbour and those still needed as a -0.1 s neighbour

@@ -253,7 +253,7 @@ def judge_truth(records: Any, truth_time_s: NDArray[np.float64], truth_ned_m: ND
                               [r.speed_ref_m_s for r, k in zip(recs, inside) if k], window_active[inside],
                               measures.path_tangent(path), settle_s=t_act + settle_s - t[inside][window_active[inside]][0])  # fmt: skip
     return UlogTruthReport(
-        window=measures.WINDOW_SETTLED if settle_s == measures.SETTLE_S else f"from activation + {settle_s:g} s",
+        window=measures.settled_window(settle_s),
         samples=int(sel.sum()),
         frame_offset_ned_m=(float(offset[0]), float(offset[1]), float(offset[2])),
         estimate_error_rms_ned_m=(float(rms[0]), float(rms[1]), float(rms[2])),

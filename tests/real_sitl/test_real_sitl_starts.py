@@ -3,9 +3,9 @@
 Skipped unless PF_OFFBOARD_ARDUCOPTER / PF_OFFBOARD_PX4_SITL point at SITL builds (see
 test_real_sitl.py). Run each in its own network namespace (``unshare -n``): the SITLs use fixed ports.
 
-- ArduCopter SITL: ``pf-offboard fly --throw 1.5`` waits; a ground station on the second MAVLink
-  port arms the vehicle in THROW mode and shoves it (SIM_SHOVE_*: up and sideways, ~4 m/s); its
-  motors start; the app takes over when it crosses 1.5 m and follows the held-out figure-eight.
+- ArduCopter SITL: ``pf-offboard fly --throw 1.8`` waits; a ground station on the second MAVLink
+  port arms the vehicle in THROW mode (THROW_MOT_START 1: motors idling) and shoves it (SIM_SHOVE_*: up and sideways, ~4 m/s); its
+  motors start; the app takes over when it crosses 1.8 m and follows the held-out racetrack.
 - PX4 SIH (no throw in SIH): a ground station takes off and sends the vehicle away at cruise speed
   (a reposition); ``fly --airborne`` engages it metres off the path, moving fast away from it.
 
@@ -59,7 +59,7 @@ def _judge(result: dict, config: Path) -> tuple[float, float, float]:
 @pytest.mark.skipif(os.environ.get("PF_OFFBOARD_ARDUCOPTER") is None, reason="set PF_OFFBOARD_ARDUCOPTER to fly ArduCopter SITL")
 def test_arducopter_thrown_start(tmp_path: Path) -> None:
     c = _campaign()
-    config = CONFIGS / "figure8-tilted.yaml"
+    config = CONFIGS / "racetrack.yaml"
     result = c.run_one(c.throw_spec(c.THROWS[3], tmp_path / "throw", config))
     conv, after, speed = _judge(result, config)
     assert speed > 1.0  # it was thrown, not lifted
