@@ -157,6 +157,13 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     config = Path(spec["config"])
     if spec.get("max_speed_m_s"):
         config = speed_profile_config(config, float(spec["max_speed_m_s"]), work)
+    if spec.get("config_extra"):
+        import yaml
+
+        data = yaml.safe_load(config.read_text())
+        data.update(spec["config_extra"])
+        config = work / f"{config.stem}-flown.yaml"
+        config.write_text(yaml.safe_dump(data, sort_keys=False))
     log_dir = work / "log"
     sitl = start_sitl(spec["autopilot"], work / "sitl", spec.get("params"))
     result: dict[str, Any] = {"spec": spec}
@@ -339,10 +346,13 @@ THROWS: tuple[dict[str, Any], ...] = (
     {"x": -13.0, "y": 4.0, "z": -28.0, "ms": 300, "params": MOTORS_IDLE},  # south, 4.1 m/s sideways
 )
 FAST_STARTS: tuple[dict[str, float], ...] = (
-    {"north_m": 30.0, "east_m": 0.0, "min_distance_m": 4.0, "min_speed_m_s": 3.0},
-    {"north_m": -20.0, "east_m": 20.0, "min_distance_m": 4.0, "min_speed_m_s": 3.0},
-    {"north_m": 0.0, "east_m": -30.0, "min_distance_m": 5.0, "min_speed_m_s": 4.0},
+    {"north_m": 30.0, "east_m": 0.0, "min_distance_m": 1.0, "min_speed_m_s": 1.5},
+    {"north_m": -20.0, "east_m": 20.0, "min_distance_m": 1.0, "min_speed_m_s": 1.5},
+    {"north_m": 0.0, "east_m": -30.0, "min_distance_m": 1.0, "min_speed_m_s": 2.0},
 )
+# a fast start ends metres outside the default fence (the path's box grown by 2 m) and farther
+# from the path than the default activation limit (3 m): the user who flies one sets them
+FAST_START_SAFETY = {"safety": {"fence_margin_m": 15.0, "max_path_distance_at_activation_m": 15.0}}
 
 
 def throw_spec(throw: dict[str, Any], workdir: Path, config: Path, height_m: float = 1.8, output: str = "attitude") -> dict[str, Any]:
@@ -352,7 +362,7 @@ def throw_spec(throw: dict[str, Any], workdir: Path, config: Path, height_m: flo
 
 def fast_start_spec(fast: dict[str, float], workdir: Path, config: Path, output: str = "acceleration") -> dict[str, Any]:
     return {"autopilot": "px4", "config": str(config), "output": output, "launch": ["--airborne"], "duration": 10,
-            "workdir": str(workdir), "fast_start": {**fast}}  # fmt: skip
+            "workdir": str(workdir), "fast_start": {**fast}, "config_extra": FAST_START_SAFETY}  # fmt: skip
 
 
 def start_figures(result: dict[str, Any]) -> str:
