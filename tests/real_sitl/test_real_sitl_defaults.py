@@ -1,4 +1,10 @@
-"""The paper's thrown start on a real autopilot, and its closest kin on PX4 (opt-in, real SITL).
+"""The default config on a held-out path, the paper's thrown start on a real autopilot, and its
+closest kin on PX4 (opt-in, real SITL; the flights are scripts/real_sitl_campaign.py's).
+
+- The default config (a path and a speed): the tilted figure-eight of ``configs/`` at 1.5 m/s, three
+  laps, every output mode, judged from activation + 8 s with the speed along the path from the
+  position's derivative against the issue's targets (ArduCopter <= 2 cm / 3 cm/s, PX4 SIH <= 4 cm /
+  5 cm/s).
 
 Skipped unless PF_OFFBOARD_ARDUCOPTER / PF_OFFBOARD_PX4_SITL point at SITL builds (see
 test_real_sitl.py). Run each in its own network namespace (``unshare -n``): the SITLs use fixed ports.
