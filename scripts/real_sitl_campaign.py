@@ -319,9 +319,10 @@ def px4_fast_start(spec: dict[str, Any], log: Any) -> None:
     north, east = fs["north_m"], fs["east_m"]
     tlat = lat + north / 6371000.0 * 180 / math.pi
     tlon = lon + east / (6371000.0 * math.cos(math.radians(lat))) * 180 / math.pi
-    m.mav.command_int_send(m.target_system, m.target_component, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    # PX4 takes DO_REPOSITION only in MAV_FRAME_GLOBAL_INT (altitude AMSL): hold the current altitude
+    m.mav.command_int_send(m.target_system, m.target_component, mavutil.mavlink.MAV_FRAME_GLOBAL_INT,
                            mavutil.mavlink.MAV_CMD_DO_REPOSITION, 0, 0, fs.get("speed_m_s", -1), 1, 0, math.nan,
-                           int(tlat * 1e7), int(tlon * 1e7), fs.get("alt_m", 2.5))  # fmt: skip
+                           int(tlat * 1e7), int(tlon * 1e7), home.alt * 1e-3)  # fmt: skip
 
     def far_and_fast() -> bool:
         pump()
