@@ -381,8 +381,8 @@ def start_figures(result: dict[str, Any]) -> str:
     after = [r.cross_track_m for r in act if conv is not None and r.time_s >= a.time_s + conv]
     return (f"activated at {a.position_enu_m[2]:.2f} m up, {a.cross_track_m:.2f} m off the path, moving {speed:.2f} m/s; "
             f"converged (<= 10 cm for 1 s) {'never' if conv is None else f'{conv:.2f} s'} after activation; then cross-track max "
-            f"{100 * max(after) if after else float('nan'):.1f} cm; from activation + 3 s: "
-            f"{'n/a' if track is None or track.settled is None else track.settled.line()}")  # fmt: skip
+            f"{100 * max(after) if after else float('nan'):.1f} cm; "
+            f"{'from activation + 3 s: n/a' if track is None or track.settled is None else track.settled.line()}")  # fmt: skip
 
 
 # ------------------------------------------------------------------------------------ the campaign
