@@ -109,15 +109,23 @@ def measure(log_dir: Path, config: Path, ulog: Path | None, settle_s: float = 8.
     out: dict[str, Any] = {"tracking": None, "truth": None}
     if not path.closed:
         # an open path: the figures up to the first step at its end; what the vehicle did after
-        # it (it flies on at the path speed until it stops) is reported apart
+        # it (it flies on at the path speed until it stops, or stops on a slowing reference) is
+        # reported apart
         import numpy as np
 
-        at_end = [i for i, r in enumerate(recs) if r.active and r.lam >= path.lam_max - 1e-6]
+        # (or where the reference starts to slow down for the stop at the end, after the start)
+        active = [r for r in recs if r.active]
+        nominal = max((abs(r.speed_ref_m_s) for r in active), default=0.0)
+        t_mid = active[0].time_s + settle_s if active else math.inf
+        at_end = [i for i, r in enumerate(recs) if r.active and (r.lam >= path.lam_max - 1e-6 or
+                  (r.time_s > t_mid and abs(r.speed_ref_m_s) < 0.99 * nominal))]  # fmt: skip
         if at_end:
             after = recs[at_end[0]:]
             out["past_the_end"] = {"cross_track_max_m": max(r.cross_track_m for r in after),
                                    "duration_s": after[-1].time_s - after[0].time_s,
-                                   "overshoot_m": float(max(np.linalg.norm(np.subtract(r.position_enu_m, path.eval_floats(path.lam_max)[0:3])) for r in after))}  # fmt: skip
+                                   # past the end point, along the path's direction there
+                                   "overshoot_m": max(0.0, float(max(np.dot(np.subtract(r.position_enu_m, path.eval_floats(path.lam_max)[0:3]),
+                                                                            measures.path_tangent(path)(path.lam_max)) for r in after)))}  # fmt: skip
             recs = recs[: at_end[0]]
     track = measures.tracking_of_records(recs, measures.path_tangent(path), settle_s)
     if track is None:
