@@ -194,13 +194,26 @@ class SummaryAccumulator:
         t, _, r, _ = self._recent[i]
         if self.tangent is None or r is None or not math.isfinite(r.lam):
             return math.nan
-        ts = [e[0] for e in self._recent]
-        if t - h < ts[0] or t + h > ts[-1]:
+        recent = self._recent
+        if t - h < recent[0][0] or t + h > recent[-1][0]:
             return math.nan
-        ps = np.array([e[1] for e in self._recent])
-        a = np.array([np.interp(t - h, ts, ps[:, k]) for k in range(3)])
-        b = np.array([np.interp(t + h, ts, ps[:, k]) for k in range(3)])
-        return float(np.dot((b - a) / (2.0 * h), self.tangent(r.lam)))
+        return float(np.dot((self._at(t + h, i, 1) - self._at(t - h, i, -1)) / (2.0 * h), self.tangent(r.lam)))
+
+    def _at(self, t: float, i: int, step: int) -> np.ndarray:
+        """The position at time ``t`` (linear between the recent steps around it), searching from
+        step ``i`` forward (``step`` 1, ``t`` after it) or back (-1, ``t`` before it)."""
+        recent = self._recent
+        j = i
+        if step > 0:
+            while j + 1 < len(recent) - 1 and recent[j + 1][0] < t:
+                j += 1
+            a, b = recent[j], recent[j + 1]
+        else:
+            while j - 1 > 0 and recent[j - 1][0] > t:
+                j -= 1
+            a, b = recent[j - 1], recent[j]
+        w = (t - a[0]) / (b[0] - a[0])
+        return np.asarray(a[1]) + w * (np.asarray(b[1]) - np.asarray(a[1]))
 
     def _drain(self, final: bool, settled: WindowSums, whole: WindowSums) -> None:
         """Count the active steps whose +0.1 s neighbour has arrived (all of them if ``final``, into
