@@ -471,6 +471,7 @@ def main(argv: list[str] | None = None) -> int:
 
         def start_worker(specs: list[dict[str, Any]]) -> None:
             for spec in specs:
+                spec.update(app_python=args.app_python, app_path=args.app_path)
                 work = Path(spec["workdir"])
                 work.mkdir(parents=True, exist_ok=True)
                 (work / "spec.json").write_text(json.dumps(spec))
