@@ -428,6 +428,40 @@ def row(result: dict[str, Any]) -> str:
     return line
 
 
+def table(directory: Path) -> list[str]:
+    """One Markdown row per (autopilot, path, output, speed): ranges over the repeats, from activation + 8 s."""
+    groups: dict[tuple[str, str, str, float], list[dict[str, Any]]] = {}
+    for res_file in sorted(directory.glob("*/result.json")):
+        d = json.loads(res_file.read_text())
+        s = d["spec"]
+        if s.get("throw") or s.get("fast_start"):
+            continue
+        groups.setdefault((s["autopilot"], Path(s["config"]).stem, s["output"], s.get("max_speed_m_s") or 1.5), []).append(d)
+
+    def rng(values: list[Any], k: float = 100.0, fmt: str = ".1f") -> str:
+        v = [x * k for x in values if x is not None]
+        if not v:
+            return "n/a"
+        lo, hi = f"{min(v):{fmt}}", f"{max(v):{fmt}}"
+        return lo if lo == hi else f"{lo}-{hi}"
+
+    out = ["| autopilot | path | output | speed | flights | exit | cross-track RMS cm | max cm | speed error RMS cm/s (position) | "
+           "(estimator) | mean speed m/s | truth cross-track RMS cm | EKF2 error horiz / vert cm |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for key in sorted(groups):
+        ds = groups[key]
+        w = [((d.get("tracking") or {}).get("settled") or {}) for d in ds]
+        t = [d["truth"] for d in ds if d.get("truth") and "error" not in d["truth"]]
+        truth = f"{rng([(x.get('truth') or {}).get('cross_track_rms_m') for x in t])}" if t else "-"
+        ekf = (f"{rng([x['estimate_error_rms_horizontal_m'] for x in t])} / {rng([x['estimate_error_rms_ned_m'][2] for x in t])}") if t else "-"
+        out.append(f"| {key[0]} | {key[1]} | {key[2]} | {'profile ' + format(key[3], 'g') if key[3] != 1.5 else '1.5'} | {len(ds)} | "
+                   f"{','.join(str(d.get('exit_code')) for d in ds)} | {rng([x.get('cross_track_rms_m') for x in w])} | "
+                   f"{rng([x.get('cross_track_max_m') for x in w])} | {rng([x.get('speed_error_rms_m_s') for x in w])} | "
+                   f"{rng([x.get('estimator_speed_error_rms_m_s') for x in w])} | {rng([x.get('speed_mean_m_s') for x in w], 1.0, '.2f')} | "
+                   f"{truth} | {ekf} |")  # fmt: skip
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--one", type=Path, help=argparse.SUPPRESS)
@@ -442,8 +476,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--px4-param", action="append", default=[], metavar="NAME=VALUE", help="a PX4 parameter for every PX4 flight")
     ap.add_argument("--tag", default="", help="appended to each flight's directory name")
     ap.add_argument("--starts", action="store_true", help="the thrown starts (ArduCopter) and fast off-path starts (PX4) instead")
+    ap.add_argument("--table", type=Path, metavar="DIR", help="a Markdown table of a campaign's flights (ranges over repeats)")
     ap.add_argument("--report", type=Path, metavar="DIR", help="measure the flights under DIR again and print them (no flying)")
     args = ap.parse_args(argv)
+    if args.table:
+        print("\n".join(table(args.table)))
+        return 0
     if args.report:
         from pf_offboard.logs.truth import find_ulog
 
