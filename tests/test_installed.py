@@ -83,7 +83,7 @@ def test_demo_flies_from_an_empty_directory_and_writes_its_logs_there(installed:
     # it followed the path: 5.6-6.3 cm whole-flight cross-track RMS (approach included) in three runs.
     # Not the convergence time: on the noisy px4-sih one lap may end on a sample outside the 5 cm /
     # speed tolerance, which leaves "converged for the rest of the flight" unmet (seen once in CI).
-    assert report["exit_code"] == 0 and report["summary"]["whole_cross_track_rms_m"] < 0.15
+    assert report["exit_code"] == 0 and report["summary"]["whole_flight"]["cross_track_rms_m"] < 0.15
     (log_dir,) = (empty / "flights").glob("demo-*")
     assert Path(report["log_dir"]).resolve() == log_dir.resolve()
     for name in ("flight.tlog", "flight.csv", "flight.yaml", "summary.json", "path3d.png", "map.png"):

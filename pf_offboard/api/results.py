@@ -54,23 +54,31 @@ class FollowResult:
     def ok(self) -> bool:
         return self.exit_code == 0
 
+    def _window(self, name: str) -> Any:
+        return None if self.summary is None else getattr(self.summary, name)
+
     @property
     def cross_track_rms_m(self) -> float | None:
-        """RMS distance to the path once converged (within 5 cm and 0.1 m/s of the reference from
-        then on), over the rest of the following (m); None if it never converged."""
-        return None if self.summary is None else self.summary.cross_track_rms_m
+        """RMS distance to the path from activation + 8 s to the end (m), the window the README and
+        the printed summary quote; None for a flight that followed for less than that."""
+        w = self._window("settled")
+        return None if w is None else w.cross_track_rms_m
+
+    @property
+    def speed_error_rms_m_s(self) -> float | None:
+        """RMS error of the speed along the path, measured from the position's derivative (±0.1 s,
+        on the path's tangent), from activation + 8 s to the end (m/s); None if shorter."""
+        w = self._window("settled")
+        return None if w is None else w.speed_error_rms_m_s
 
     @property
     def whole_cross_track_rms_m(self) -> float | None:
         """RMS distance to the path over the whole following, convergence included (m)."""
-        return None if self.summary is None else self.summary.whole_cross_track_rms_m
+        w = self._window("whole")
+        return None if w is None else w.cross_track_rms_m
 
     @property
     def whole_speed_error_rms_m_s(self) -> float | None:
-        """RMS speed error over the whole following, convergence included (m/s)."""
-        return None if self.summary is None else self.summary.whole_speed_error_rms_m_s
-
-    @property
-    def speed_error_rms_m_s(self) -> float | None:
-        """RMS error of the speed along the path once converged (m/s); None if it never converged."""
-        return None if self.summary is None else self.summary.speed_error_rms_m_s
+        """RMS speed error (from the position) over the whole following, convergence included (m/s)."""
+        w = self._window("whole")
+        return None if w is None else w.speed_error_rms_m_s

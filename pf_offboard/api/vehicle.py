@@ -537,6 +537,9 @@ class Vehicle:
 
                 follower = controller_from_config(config)
                 path = follower.path
+                from pf_offboard.logs.measures import path_tangent
+
+                summary_acc.tangent = path_tangent(path)  # the speed along the path from the position
                 length, closed, lam_max = path.length_m, path.closed, path.lam_max
                 safety = getattr(config, "safety", None) or SafetyConfig()
                 fence = fence if fence is not None else envelope_fence(config)

@@ -35,6 +35,7 @@ import numpy as np
 from pf_offboard.errors import InputError
 from pf_offboard.logs.flightlog import FlightLogPaths
 from pf_offboard.logs.steplog import StepRecord, read_steplog
+from pf_offboard.logs.measures import path_tangent
 from pf_offboard.logs.summary import FlightSummary, summarize
 from pf_offboard.logs.tlog import TlogEntry, read_tlog
 
@@ -347,7 +348,7 @@ def replay_flight(
         setpoint_max=setpoint_max,
         record_max=record_max,
         problems=tuple(problems),
-        summary=summarize(records),
+        summary=summarize(records, path_tangent(pipeline.follower.path)),
         profile=profile.name,
         output_mode=output_mode,
     )
@@ -367,6 +368,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="acceleration output: were setpoints encoded for an autopilot that tilts from g alone (PX4 MPC_ACC_DECOUPLE 1)? "
                              "default: the logged parameter, else the autopilot's default (yes); 'no' for flights of pf-offboard before 2026-11-24")  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print the report and flight summary as JSON")
+    parser.add_argument("--truth", metavar="FLIGHT.ulg",
+                        help="PX4 SIH's ULog of the same flight: the flight against the simulator's ground truth "
+                             "(vehicle_local_position_groundtruth), the frames' constant offset apart from the estimate's error")  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
@@ -399,13 +403,26 @@ def run(args: argparse.Namespace) -> int:
         tilt_from_gravity=None if args.tilt_from_gravity is None else args.tilt_from_gravity == "yes",
         tolerance=args.tolerance,
     )
+    truth_report = None
+    if args.truth:
+        from pf_offboard.logs.truth import read_ulog_truth
+
+        truth_t, truth_ned = read_ulog_truth(args.truth)  # an unreadable ULog is bad input, before the replay
     report = replay_flight(args.log, config, args.steps, options)
+    if args.truth:
+        from pf_offboard.logs.steplog import read_steplog
+        from pf_offboard.logs.truth import judge_truth
+
+        steps_csv = Path(args.steps) if args.steps else FlightLogPaths.beside(args.log).steps_csv
+        truth_report = judge_truth(read_steplog(steps_csv), truth_t, truth_ned, config.path.spline())
     if args.json:
         from pf_offboard.logs.summary import flight_report, report_json
 
         doc = flight_report(report.summary, 0 if report.ok else 1, "replay " + ("matches" if report.ok else "differs"),
                             Path(args.log).parent, config, "replay")  # fmt: skip
         doc["replay_lines"] = report.lines()
+        if truth_report is not None:
+            doc["ground_truth"] = truth_report.to_dict()
         print(report_json(doc))
         return 0 if report.ok else 1
     for line in report.lines():
@@ -413,4 +430,7 @@ def run(args: argparse.Namespace) -> int:
     print("flight summary:")
     for line in report.summary.lines():
         print("  " + line)
+    if truth_report is not None:
+        for line in truth_report.lines():
+            print(line)
     return 0 if report.ok else 1

@@ -1,30 +1,46 @@
 """Flight summary from a step log: how fast and how well the vehicle got onto the path.
 
-Definitions (all over *active* steps, i.e. while the follower's setpoints were streamed):
+The measures are :mod:`pf_offboard.logs.measures`' (one definition for every command), over
+*active* steps (while the follower's setpoints were streamed):
 
 - activation: vehicle time of the first active step;
-- convergence time: time from activation to the first step after which every later active
-  step has ``cross_track_m <= cross_track_tol_m`` and ``|eta2 - eta2_ref| <= speed_tol_m_s``
-  (None when the flight never settles);
-- cross-track RMS / max: over active steps from convergence on;
-- speed error RMS: of ``eta2 - eta2_ref`` over the same steps;
-- whole flight: cross-track RMS / max and speed error RMS / mean over *every* active step from
-  activation on (always given when there are active steps, also when the convergence rule
-  never holds, e.g. on a real vehicle whose GPS noise keeps it beyond 5 cm);
+- convergence time: from activation to the first time the cross-track error stays <= 10 cm for
+  1 s (None when it never does);
+- two named windows, each with cross-track RMS / max, the speed along the path from the
+  *position's* derivative (±0.1 s, on the path's tangent: mean, error RMS and mean), and the
+  estimator's velocity figure (η2 − η2_ref, RMS and mean) beside it: "from activation + 8 s" (what
+  the docs quote; None in a shorter flight) and "whole flight" (every active step);
 - saturation time: per limit, the summed duration of active steps whose flag is set (each
   step counts for the interval to the next step);
 - mode changes: (time, from, to) whenever the ``mode`` column changes, and logged events.
+
+Without the path (``tangent=None``) the position-derived speed is not available (n/a).
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from pf_offboard.logs.measures import (
+    CONVERGED_DEFINITION,
+    DERIVATIVE_HALF_WINDOW_S,
+    SETTLE_S,
+    WINDOW_SETTLED,
+    WINDOW_WHOLE,
+    Convergence,
+    Tangent,
+    WindowFigures,
+    WindowSums,
+    settled_window,
+)
 from pf_offboard.logs.steplog import StepRecord
 
 SAT_FLAGS = ("sat_tangential", "sat_transversal", "sat_tilt", "sat_thrust", "sat_approach_speed")
@@ -36,41 +52,48 @@ class FlightSummary:
     steps: int
     active_steps: int
     activation_time_s: float | None  # vehicle time
-    convergence_time_s: float | None  # seconds after activation
-    cross_track_rms_m: float | None
-    cross_track_max_m: float | None
-    speed_error_rms_m_s: float | None
+    convergence_time_s: float | None  # seconds after activation (measures.CONVERGED_DEFINITION)
+    settled: WindowFigures | None  # from activation + 8 s
+    whole: WindowFigures | None  # every active step
     saturation_s: dict[str, float]
     mode_changes: tuple[tuple[float, str, str], ...]
     events: tuple[tuple[float, str], ...]
-    # over every active step (from activation on); None without active steps
-    whole_cross_track_rms_m: float | None = None
-    whole_cross_track_max_m: float | None = None
-    whole_speed_error_rms_m_s: float | None = None
-    whole_speed_error_mean_m_s: float | None = None
+
+    # shorthands (window in the name)
+    @property
+    def settled_cross_track_rms_m(self) -> float | None:
+        return None if self.settled is None else self.settled.cross_track_rms_m
+
+    @property
+    def settled_speed_error_rms_m_s(self) -> float | None:
+        return None if self.settled is None else self.settled.speed_error_rms_m_s
+
+    @property
+    def whole_cross_track_rms_m(self) -> float | None:
+        return None if self.whole is None else self.whole.cross_track_rms_m
+
+    @property
+    def whole_cross_track_max_m(self) -> float | None:
+        return None if self.whole is None else self.whole.cross_track_max_m
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: every field by name (units in the names; None where undefined)."""
+        """JSON-ready: every field by name (units and windows in the names; None where undefined)."""
         return {
             "duration_s": self.duration_s,
             "steps": self.steps,
             "active_steps": self.active_steps,
             "activation_time_s": self.activation_time_s,
             "convergence_time_s": self.convergence_time_s,
-            "cross_track_rms_m": self.cross_track_rms_m,
-            "cross_track_max_m": self.cross_track_max_m,
-            "speed_error_rms_m_s": self.speed_error_rms_m_s,
+            "convergence_definition": CONVERGED_DEFINITION,
+            "from_activation_plus_8s": None if self.settled is None else self.settled.to_dict(),
+            "whole_flight": None if self.whole is None else self.whole.to_dict(),
             "saturation_s": dict(self.saturation_s),
             "mode_changes": [{"time_s": t, "from": a, "to": b} for t, a, b in self.mode_changes],
             "events": [{"time_s": t, "event": e} for t, e in self.events],
-            "whole_cross_track_rms_m": self.whole_cross_track_rms_m,
-            "whole_cross_track_max_m": self.whole_cross_track_max_m,
-            "whole_speed_error_rms_m_s": self.whole_speed_error_rms_m_s,
-            "whole_speed_error_mean_m_s": self.whole_speed_error_mean_m_s,
         }
 
     def lines(self) -> list[str]:
-        """Human-readable summary, one fact per line."""
+        """Human-readable summary, one fact per line; each figure names its window."""
 
         def f(x: float | None, unit: str, fmt: str = ".3f") -> str:
             return "n/a" if x is None else f"{x:{fmt}} {unit}"
@@ -78,13 +101,9 @@ class FlightSummary:
         out = [
             f"duration            {self.duration_s:.3f} s, {self.steps} steps ({self.active_steps} active)",
             f"activation          {f(self.activation_time_s, 's (vehicle time)')}",
-            f"convergence time    {f(self.convergence_time_s, 's after activation')}",
-            f"cross-track RMS     {f(self.cross_track_rms_m, 'm', '.4f')} (after convergence)",
-            f"cross-track max     {f(self.cross_track_max_m, 'm', '.4f')} (after convergence)",
-            f"speed error RMS     {f(self.speed_error_rms_m_s, 'm/s', '.4f')} (after convergence)",
-            f"whole flight        cross-track RMS {f(self.whole_cross_track_rms_m, 'm', '.4f')}, max {f(self.whole_cross_track_max_m, 'm', '.4f')}; "
-            f"speed error RMS {f(self.whole_speed_error_rms_m_s, 'm/s', '.4f')}, mean {f(self.whole_speed_error_mean_m_s, 'm/s', '+.4f')} "
-            "(all active steps)",
+            f"converged           {f(self.convergence_time_s, 's after activation', '.2f')} ({CONVERGED_DEFINITION})",
+            (self.settled.line() if self.settled is not None else f"{WINDOW_SETTLED}: n/a (the flight followed for less than 8 s)"),
+            (self.whole.line() if self.whole is not None else f"{WINDOW_WHOLE}: n/a (no active step)"),
             "saturation          " + ", ".join(f"{k.removeprefix('sat_')} {v:.2f} s" for k, v in self.saturation_s.items()),
         ]
         for t, a, b in self.mode_changes:
@@ -103,14 +122,14 @@ class SummaryAccumulator:
     """The :class:`FlightSummary` of a stream of step records, in constant memory.
 
     ``add(record)`` per step, ``result()`` at any time; the same definitions as :func:`summarize`
-    (which is this, over a sequence). Convergence is "the first active step after the last bad
-    one": the sums over the steps from convergence on restart at every bad active step, so only
-    running sums are kept, never the steps.
+    (which is this, over a sequence) and :func:`pf_offboard.logs.measures.tracking`. The position's
+    central difference needs the steps up to 0.1 s after each: a step is counted once a step 0.1 s
+    later has arrived (a short delay line of recent steps), the last 0.1 s at ``result()``.
     """
 
-    def __init__(self, cross_track_tol_m: float = 0.05, speed_tol_m_s: float = 0.1) -> None:
-        self.cross_track_tol_m = cross_track_tol_m
-        self.speed_tol_m_s = speed_tol_m_s
+    def __init__(self, tangent: Tangent | None = None, settle_s: float = SETTLE_S) -> None:
+        self.tangent = tangent
+        self.settle_s = settle_s
         self.steps = 0
         self.active_steps = 0
         self._t_first = self._t_last = math.nan
@@ -121,17 +140,12 @@ class SummaryAccumulator:
         self._events: list[tuple[float, str]] = []
         self.events_dropped = 0
         self._t_act: float | None = None
-        # the window from convergence on: start time, count, sum of squares, max
-        self._conv_t: float | None = None
-        self._n = 0
-        self._ct2 = 0.0
-        self._ct_max = -math.inf
-        self._err2 = 0.0
-        # the whole flight (every finite active step): count, sums of squares, max, sum
-        self._w_nc = self._w_ne = 0
-        self._w_ct2 = self._w_err2 = self._w_err = 0.0
-        self._w_ct_max = -math.inf
-
+        self._conv = Convergence()
+        self._settled = WindowSums(settled_window(settle_s), settle_s)
+        self._whole = WindowSums(WINDOW_WHOLE, 0.0)
+        # recent steps [time, position, active record or None, counted]: the ones waiting for their
+        # +0.1 s neighbour and those still needed as a -0.1 s neighbour
+        self._recent: deque[list[Any]] = deque()
     def add(self, r: StepRecord) -> None:
         t = r.time_s
         prev = self._prev
@@ -153,73 +167,107 @@ class SummaryAccumulator:
                 self._events.append((t, r.event))
             else:
                 self.events_dropped += 1
-        if not r.active:
+        if r.active:
+            self.active_steps += 1
+            if self._t_act is None:
+                self._t_act = t
+            self._conv.add(t, r.cross_track_m)
+        pos = np.asarray(r.position_enu_m, dtype=float)
+        if not (math.isfinite(t) and (not self._recent or t > self._recent[-1][0])):
+            # not newer than the last step: no derivative through it; counted without one
+            if r.active:
+                self._count(r, math.nan, self._settled, self._whole)
             return
-        self.active_steps += 1
-        if self._t_act is None:
-            self._t_act = t
-        ct = r.cross_track_m
-        err = r.eta2_m_s - r.speed_ref_m_s
-        if math.isfinite(ct):
-            self._w_nc += 1
-            self._w_ct2 += ct * ct
-            self._w_ct_max = max(self._w_ct_max, ct)
-        if math.isfinite(err):
-            self._w_ne += 1
-            self._w_err2 += err * err
-            self._w_err += err
-        good = ct <= self.cross_track_tol_m and abs(err) <= self.speed_tol_m_s  # False for NaN
-        if not good:
-            self._conv_t, self._n, self._ct2, self._ct_max, self._err2 = None, 0, 0.0, -math.inf, 0.0
+        self._recent.append([t, pos, r if r.active else None, False])
+        self._drain(final=False, settled=self._settled, whole=self._whole)
+
+    def _count(self, r: StepRecord, speed: float, settled: WindowSums, whole: WindowSums) -> None:
+        assert self._t_act is not None
+        args = (r.time_s, r.cross_track_m, speed, r.eta2_m_s, r.speed_ref_m_s)
+        whole.add(*args)
+        if r.time_s >= self._t_act + self.settle_s:
+            settled.add(*args)
+
+    def _speed(self, i: int) -> float:
+        """Position-derived speed along the path of ``_recent[i]`` (NaN without both neighbours)."""
+        h = DERIVATIVE_HALF_WINDOW_S
+        t, _, r, _ = self._recent[i]
+        if self.tangent is None or r is None or not math.isfinite(r.lam):
+            return math.nan
+        recent = self._recent
+        if t - h < recent[0][0] or t + h > recent[-1][0]:
+            return math.nan
+        return float(np.dot((self._at(t + h, i, 1) - self._at(t - h, i, -1)) / (2.0 * h), self.tangent(r.lam)))
+
+    def _at(self, t: float, i: int, step: int) -> np.ndarray:
+        """The position at time ``t`` (linear between the recent steps around it), searching from
+        step ``i`` forward (``step`` 1, ``t`` after it) or back (-1, ``t`` before it)."""
+        recent = self._recent
+        j = i
+        if step > 0:
+            while j + 1 < len(recent) - 1 and recent[j + 1][0] < t:
+                j += 1
+            a, b = recent[j], recent[j + 1]
+        else:
+            while j - 1 > 0 and recent[j - 1][0] > t:
+                j -= 1
+            a, b = recent[j - 1], recent[j]
+        w = (t - a[0]) / (b[0] - a[0])
+        return np.asarray(a[1]) + w * (np.asarray(b[1]) - np.asarray(a[1]))
+
+    def _drain(self, final: bool, settled: WindowSums, whole: WindowSums) -> None:
+        """Count the active steps whose +0.1 s neighbour has arrived (all of them if ``final``, into
+        ``settled`` / ``whole`` only); then forget what no later step needs."""
+        h = DERIVATIVE_HALF_WINDOW_S
+        t_last = self._recent[-1][0]
+        first_pending: float | None = None
+        for i, entry in enumerate(self._recent):
+            t, _, r, counted = entry
+            if r is None or counted:
+                continue
+            if not final and t + h > t_last:
+                first_pending = t
+                break
+            self._count(r, self._speed(i), settled, whole)
+            if not final:
+                entry[3] = True
+        if final:
             return
-        if self._conv_t is None:
-            self._conv_t = t
-        self._n += 1
-        self._ct2 += ct * ct
-        self._ct_max = max(self._ct_max, ct)
-        self._err2 += err * err
+        keep_from = (first_pending if first_pending is not None else t_last) - h
+        while len(self._recent) > 1 and self._recent[1][0] <= keep_from:
+            self._recent.popleft()
 
     def result(self) -> FlightSummary:
         if self.steps == 0:
-            return FlightSummary(0.0, 0, 0, None, None, None, None, None, {k: 0.0 for k in SAT_FLAGS}, (), ())
+            return FlightSummary(0.0, 0, 0, None, None, None, None, {k: 0.0 for k in SAT_FLAGS}, (), ())
         events = tuple(self._events)
         if self.events_dropped:
             events += ((self._t_last, f"... {self.events_dropped} more events (see the step log)"),)
         duration = float(self._t_last - self._t_first)
         saturation = dict(self._saturation)
         if self._t_act is None:
-            return FlightSummary(duration, self.steps, 0, None, None, None, None, None, saturation, tuple(self._modes), events)
-        if self._conv_t is None:
-            conv = rms = mx = srms = None
-        else:
-            conv = self._conv_t - self._t_act
-            rms = math.sqrt(self._ct2 / self._n)
-            mx = self._ct_max
-            srms = math.sqrt(self._err2 / self._n)
+            return FlightSummary(duration, self.steps, 0, None, None, None, None, saturation, tuple(self._modes), events)
+        settled, whole = self._settled.copy(), self._whole.copy()
+        self._drain(final=True, settled=settled, whole=whole)  # the last 0.1 s: no derivative
+        conv = self._conv.time_s
         return FlightSummary(
             duration_s=duration,
             steps=self.steps,
             active_steps=self.active_steps,
             activation_time_s=self._t_act,
-            convergence_time_s=conv,
-            cross_track_rms_m=rms,
-            cross_track_max_m=mx,
-            speed_error_rms_m_s=srms,
+            convergence_time_s=None if conv is None else conv - self._t_act,
+            settled=settled.result(),
+            whole=whole.result(),
             saturation_s=saturation,
             mode_changes=tuple(self._modes),
             events=events,
-            whole_cross_track_rms_m=math.sqrt(self._w_ct2 / self._w_nc) if self._w_nc else None,
-            whole_cross_track_max_m=self._w_ct_max if self._w_nc else None,
-            whole_speed_error_rms_m_s=math.sqrt(self._w_err2 / self._w_ne) if self._w_ne else None,
-            whole_speed_error_mean_m_s=self._w_err / self._w_ne if self._w_ne else None,
         )
 
 
-def summarize(
-    records: Iterable[StepRecord], cross_track_tol_m: float = 0.05, speed_tol_m_s: float = 0.1
-) -> FlightSummary:
-    """Summarise a flight's step log (see the module docstring for the definitions)."""
-    acc = SummaryAccumulator(cross_track_tol_m, speed_tol_m_s)
+def summarize(records: Iterable[StepRecord], tangent: Tangent | None = None, settle_s: float = SETTLE_S) -> FlightSummary:
+    """Summarise a flight's step log (see the module docstring for the definitions); ``tangent``:
+    the path's (:func:`pf_offboard.logs.measures.path_tangent`) for the position-derived speed."""
+    acc = SummaryAccumulator(tangent, settle_s)
     for r in records:
         acc.add(r)
     return acc.result()

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -139,3 +140,131 @@ def describe(r: TruthReport, skip_s: float) -> str:
         f"estimate - truth (N, E, D)   RMS {cm(r.estimate_error_rms_ned_m)} cm; peak-to-peak {cm(r.estimate_error_p2p_ned_m)} cm\n"
         f"cross-track RMS              estimate {100 * r.cross_track_rms_estimate_m:.1f} cm; truth {100 * r.cross_track_rms_truth_m:.1f} cm"
     )
+
+
+# --------------------------------------------------------------------------- PX4 ULog ground truth
+@dataclass(frozen=True)
+class UlogTruthReport:
+    """A flight against PX4 SIH's ground truth (``vehicle_local_position_groundtruth`` in its ULog).
+
+    Over one window of the step log (``window``). ``frame_offset_ned_m``: the constant offset
+    between the estimate's frame (EKF2's origin) and the truth's, the mean of estimate − truth;
+    not an error of the flight. ``estimate_error_*``: estimate − truth − that offset (EKF2's own
+    error, the floor no controller steering the estimate can get under). ``truth``: the flight
+    measured from the truth moved by the offset (where the vehicle really was relative to the path
+    the estimate was steered onto); ``truth_raw_cross_track_rms_m``: the truth as it is, offset
+    included (what a tape measure would say if both frames had one origin)."""
+
+    window: str
+    samples: int
+    frame_offset_ned_m: tuple[float, float, float]
+    estimate_error_rms_ned_m: tuple[float, float, float]
+    estimate_error_p2p_ned_m: tuple[float, float, float]
+    estimate_error_rms_horizontal_m: float
+    truth: Any  # measures.WindowFigures: the truth + offset against the path
+    truth_raw_cross_track_rms_m: float
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        d["truth"] = None if self.truth is None else self.truth.to_dict()
+        return d
+
+    def lines(self) -> list[str]:
+        cm = lambda v: ", ".join(f"{100 * x:.1f}" for x in v)  # noqa: E731
+        out = [
+            f"ground truth ({self.window}, {self.samples} samples):",
+            f"  frame offset (estimate - truth, N E D)   {cm(self.frame_offset_ned_m)} cm (constant: the frames' origins, not an error)",
+            f"  estimate error (offset removed, N E D)   RMS {cm(self.estimate_error_rms_ned_m)} cm "
+            f"(horizontal {100 * self.estimate_error_rms_horizontal_m:.1f}); peak-to-peak {cm(self.estimate_error_p2p_ned_m)} cm",
+        ]
+        if self.truth is not None:
+            out.append("  truth + offset: " + self.truth.line())
+        out.append(f"  truth as logged (offset included): cross-track RMS {100 * self.truth_raw_cross_track_rms_m:.1f} cm")
+        return out
+
+
+def read_ulog_truth(ulog_file: str | Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(time since boot s, NED position m (N, 3)) of ``vehicle_local_position_groundtruth``."""
+    try:
+        from pyulog import ULog
+    except ImportError as exc:  # a dependency: only a broken install lacks it
+        raise InputError(str(ulog_file), "reading a ULog needs pyulog (pip install pyulog)") from exc
+    try:
+        ulog = ULog(str(ulog_file), ["vehicle_local_position_groundtruth"])
+    except Exception as exc:  # pyulog raises plain exceptions on a bad file  # noqa: BLE001
+        raise InputError(str(ulog_file), f"not a readable ULog ({type(exc).__name__}: {exc})") from exc
+    sets = [d for d in ulog.data_list if d.name == "vehicle_local_position_groundtruth"]
+    if not sets or len(sets[0].data["timestamp"]) < 2:
+        raise InputError(str(ulog_file), "no vehicle_local_position_groundtruth in the ULog (PX4 logs it in SITL builds and with SYS_HITL)")
+    d = sets[0].data
+    t = np.asarray(d["timestamp"], dtype=float) * 1e-6
+    ned = np.column_stack([np.asarray(d[k], dtype=float) for k in ("x", "y", "z")])
+    ok = np.isfinite(ned).all(axis=1)
+    return t[ok], ned[ok]
+
+
+def judge_truth(records: Any, truth_time_s: NDArray[np.float64], truth_ned_m: NDArray[np.float64], path: SplinePath,
+                settle_s: float = 8.0) -> UlogTruthReport:  # fmt: skip
+    """The flight of ``records`` (step log, vehicle time = the autopilot's boot clock, as the
+    ULog's) against the truth, from activation + ``settle_s`` to the last active step."""
+    from pf_offboard.logs import measures
+
+    recs = list(records)
+    active = [r for r in recs if r.active]
+    if not active:
+        raise InputError("step log", "no active step")
+    t_act = active[0].time_s
+    t = np.array([r.time_s for r in recs])
+    inside = (t >= truth_time_s[0]) & (t <= truth_time_s[-1])
+    sel = inside & (t >= t_act + settle_s) & (t <= active[-1].time_s) & np.array([r.active for r in recs])
+    if sel.sum() < 2:
+        raise InputError("ULog", f"no ground truth over the flight from activation + {settle_s:g} s (another flight's log?)")
+    est_ned = np.array([frames.enu_to_ned(r.position_enu_m) for r in recs], dtype=float)
+    tru_at = np.column_stack([np.interp(t, truth_time_s, truth_ned_m[:, k]) for k in range(3)])
+    diff = est_ned[sel] - tru_at[sel]
+    offset = diff.mean(axis=0)
+    err = diff - offset
+    rms = np.sqrt((err**2).mean(axis=0))
+    p2p = err.max(axis=0) - err.min(axis=0)
+    # the truth moved by the offset, as a flight: projected, cross-track, speed from its derivative.
+    # Each truth point is projected starting from where its estimate projects (found afresh, the
+    # estimate being near the path): on a helix, a warm start carried from sample to sample could
+    # lock onto the neighbouring turn.
+    moved = tru_at + offset
+    lam = np.full(len(t), math.nan)
+    ct = np.full(len(t), math.nan)
+    ct_raw = []
+    proj = Projector(path, jump_m=5.0)
+
+    def near(estimate_ned: NDArray[np.float64], point_ned: NDArray[np.float64]) -> tuple[float, float]:
+        proj.reset()
+        proj.update(np.asarray(frames.ned_to_enu(estimate_ned), dtype=float))
+        enu = np.asarray(frames.ned_to_enu(point_ned), dtype=float)
+        lam_i = proj.update(enu)
+        return lam_i, float(np.linalg.norm(enu - np.asarray(path.eval_floats(lam_i)[0:3])))
+
+    for i in np.flatnonzero(inside):
+        lam[i], ct[i] = near(est_ned[i], moved[i])
+        if sel[i]:
+            ct_raw.append(near(est_ned[i], tru_at[i])[1])
+    moved_enu = np.array([frames.ned_to_enu(p) for p in moved], dtype=float)
+    window_active = inside & np.array([r.active for r in recs])
+    track = measures.tracking(t[inside], moved_enu[inside], lam[inside], ct[inside], np.full(int(inside.sum()), math.nan),
+                              [r.speed_ref_m_s for r, k in zip(recs, inside) if k], window_active[inside],
+                              measures.path_tangent(path), settle_s=t_act + settle_s - t[inside][window_active[inside]][0])  # fmt: skip
+    return UlogTruthReport(
+        window=measures.settled_window(settle_s),
+        samples=int(sel.sum()),
+        frame_offset_ned_m=(float(offset[0]), float(offset[1]), float(offset[2])),
+        estimate_error_rms_ned_m=(float(rms[0]), float(rms[1]), float(rms[2])),
+        estimate_error_p2p_ned_m=(float(p2p[0]), float(p2p[1]), float(p2p[2])),
+        estimate_error_rms_horizontal_m=float(math.hypot(rms[0], rms[1])),
+        truth=None if track is None else track.settled,
+        truth_raw_cross_track_rms_m=float(math.sqrt(np.mean(np.square(ct_raw)))),
+    )
+
+
+def find_ulog(directory: str | Path) -> Path | None:
+    """The newest ``.ulg`` under ``directory`` (PX4 writes them under its rootfs ``log/``)."""
+    found = sorted(Path(directory).rglob("*.ulg"), key=lambda p: p.stat().st_mtime)
+    return found[-1] if found else None

@@ -41,12 +41,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--rate", type=float, metavar="HZ", help="control/telemetry rate (default: config)")
     g.add_argument("--duration", type=float, default=f.duration_s, metavar="S", help=f"simulated seconds per flight (default {f.duration_s:g})")
     g.add_argument("--tube", type=float, default=f.tube_m, metavar="M",
-                   help=f"converged: the first time the cross-track is <= M (default {f.tube_m:g})")
+                   help=f"caught: the first time the cross-track is <= M (default {f.tube_m:g})")
     g.add_argument("--stay", type=float, default=f.stay_m, metavar="M",
-                   help=f"a success keeps the cross-track <= M from convergence to the end (default {f.stay_m:g})")
-    g.add_argument("--speed-tol", type=float, metavar="M_S", help="converged also needs |eta2 - eta2_ref| <= M_S (default: not judged)")
+                   help=f"a success keeps the cross-track <= M from being caught to the end (default {f.stay_m:g})")
+    g.add_argument("--speed-tol", type=float, metavar="M_S", help="caught also needs |eta2 - eta2_ref| <= M_S (default: not judged)")
     g.add_argument("--settle", type=float, default=f.settle_s, metavar="S",
-                   help=f"a success converged at least S before the end (default {f.settle_s:g})")
+                   help=f"a success was caught at least S before the end (default {f.settle_s:g})")
     g.add_argument("--keep-logs", action="store_true", help="write every flight's .tlog/.csv under OUT/flights/ (slower)")
     s = parser.add_argument_group("random starts (thrown: the controller engages at the drawn state)")
     s.add_argument("--max-distance", type=float, default=r.max_distance_m, metavar="M", help=f"from the path (default {r.max_distance_m:g})")
@@ -157,10 +157,10 @@ def run(args: argparse.Namespace) -> int:
             summary["gain_ranking" + suffix.replace("-", "_")] = ranking
             print(f"  gains{label} (best first): " + "; ".join(
                 f"#{r['rank']} {r['bandwidth_hz']:.3g} Hz / {r['damping']:.3g}: {100 * r['success_rate']:.0f} %, p90 "
-                f"{r['convergence_p90_s']:.2f} s" for r in ranking[:5]))  # fmt: skip
+                f"{r['caught_p90_s']:.2f} s" for r in ranking[:5]))  # fmt: skip
     report.write_json(summary, out / "summary.json")
     if not args.no_plot:
-        title = f"{len(result.rows)} thrown starts, {spec.settings.vehicle}: {100 * stats['success_rate']:.1f} % converged"
+        title = f"{len(result.rows)} thrown starts, {spec.settings.vehicle}: {100 * stats['success_rate']:.1f} % caught"
         files.append(report.roa_plot(result.rows, out / "roa.png", title))
     print("files: " + " ".join(str(p) for p in [*files, out / "summary.json"]))
     return 1 if stats["failures_by_kind"].get("error") else 0

@@ -78,24 +78,24 @@ def with_gains(data: Mapping[str, Any], candidate: GainCandidate) -> dict[str, A
 
 def rank(rows: Sequence[Mapping[str, Any]], cands: Sequence[GainCandidate]) -> list[dict[str, Any]]:
     """One line per candidate, best first: highest success rate, then the shortest 90th-percentile
-    convergence time over all its flights (a failed flight counts as never converging: inf), then
-    the shortest median, then the tightest tracking after convergence."""
+    time to be caught over all its flights (a failed flight counts as never caught: inf), then
+    the shortest median, then the tightest tracking after being caught."""
     out = []
     for c in cands:
         mine = [r for r in rows if r["gains_id"] == c.id]
         ok = sum(bool(r["success"]) for r in mine)
-        times = [r["convergence_time_s"] if r["success"] else math.inf for r in mine]
+        times = [r["caught_time_s"] if r["success"] else math.inf for r in mine]
         p50, p90 = (float(np.percentile(times, q, method="inverted_cdf")) if times else math.inf for q in (50, 90))
         rms = [r["cross_track_rms_after_m"] for r in mine if r["success"]]
         out.append({
             **c.columns(),
             "flights": len(mine),
             "success_rate": ok / len(mine) if mine else 0.0,
-            "convergence_p50_s": p50,
-            "convergence_p90_s": p90,
+            "caught_p50_s": p50,
+            "caught_p90_s": p90,
             "cross_track_rms_after_m_mean": float(np.mean(rms)) if rms else math.nan,
         })  # fmt: skip
-    out.sort(key=lambda r: (-r["success_rate"], r["convergence_p90_s"], r["convergence_p50_s"],
+    out.sort(key=lambda r: (-r["success_rate"], r["caught_p90_s"], r["caught_p50_s"],
                             math.inf if math.isnan(r["cross_track_rms_after_m_mean"]) else r["cross_track_rms_after_m_mean"], r["gains_id"]))
     for i, r in enumerate(out, 1):
         r["rank"] = i

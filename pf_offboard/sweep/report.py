@@ -3,10 +3,10 @@
 - ``flights.partial.csv``: the rows as they come back, while the sweep runs;
 - ``flights.csv``: one row per flight (start, outcome; units in the column names), always;
   ``flights.parquet`` too when ``pyarrow`` is installed (it is not a dependency);
-- ``summary.json``: success rate, convergence-time percentiles over the successful flights, the
+- ``summary.json``: success rate, catch-time percentiles over the successful flights, the
   failures by kind with the ranges of their starts, the settings and the wall time;
 - ``roa.png``: initial distance from the path against initial speed, each flight coloured by its
-  convergence time, failures marked (plus convergence time against distance).
+  time to be caught, failures marked (plus that time against distance).
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ def write_table(rows: Sequence[Mapping[str, Any]], out_dir: Path, stem: str = "f
     return written
 
 
-def convergence_percentiles(rows: Sequence[Mapping[str, Any]], column: str = "convergence_time_s") -> dict[str, float]:
+def convergence_percentiles(rows: Sequence[Mapping[str, Any]], column: str = "caught_time_s") -> dict[str, float]:
     """Percentiles, mean and max of a time column (s) over the successful flights."""
     times = np.array([r[column] for r in rows if r["success"]], dtype=float)
     if times.size == 0:
@@ -87,9 +87,9 @@ def failure_kind(row: Mapping[str, Any]) -> str:
         return "crashed"
     if row["ground_contact"]:
         return "touched the ground"
-    if "converged only" in reason:
-        return "converged too late"
-    return "left the tube after converging" if "and not back" in reason else "never converged"
+    if "caught only" in reason:
+        return "caught too late"
+    return "left the tube after being caught" if "and not back" in reason else "never caught"
 
 
 def success_by_bin(rows: Sequence[Mapping[str, Any]], bins: int = 4) -> dict[str, list[dict[str, float]]]:
@@ -134,7 +134,7 @@ def sim_command(row: Mapping[str, Any], config: str, flight: Mapping[str, Any]) 
 
 
 def summarize(rows: Sequence[Mapping[str, Any]], config: str = "CONFIG", flight: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """Success rate, convergence-time statistics and the failures (kinds, start ranges, flights;
+    """Success rate, catch-time statistics and the failures (kinds, start ranges, flights;
     with ``flight`` settings, each failure's ``sim`` command)."""
     n = len(rows)
     failed = [r for r in rows if not r["success"]]
@@ -142,9 +142,9 @@ def summarize(rows: Sequence[Mapping[str, Any]], config: str = "CONFIG", flight:
         "flights": n,
         "successes": n - len(failed),
         "success_rate": (n - len(failed)) / n if n else math.nan,
-        "convergence_time": convergence_percentiles(rows),
+        "caught_time": convergence_percentiles(rows),
         # the first step within the inner tube, even if a later excursion beyond the outer one reset
-        # the convergence: the approach alone
+        # being caught: the approach alone
         "first_in_tube_time": convergence_percentiles(rows, "first_in_tube_time_s"),
         "failures_by_kind": dict(sorted(Counter(failure_kind(r) for r in failed).items())),
         "failed_start_ranges": _ranges(failed),
@@ -159,11 +159,11 @@ def summarize(rows: Sequence[Mapping[str, Any]], config: str = "CONFIG", flight:
 
 def lines(stats: Mapping[str, Any]) -> list[str]:
     """The summary for a terminal."""
-    c, a = stats["convergence_time"], stats["first_in_tube_time"]
+    c, a = stats["caught_time"], stats["first_in_tube_time"]
     out = [
-        f"flights             {stats['flights']}, converged {stats['successes']} "
+        f"flights             {stats['flights']}, caught {stats['successes']} "
         f"({100.0 * stats['success_rate']:.1f} %)",
-        "convergence time    " + ", ".join(f"p{q} {c[f'p{q}_s']:.2f} s" for q in PERCENTILES) + f", max {c['max_s']:.2f} s"
+        "caught after       " + ", ".join(f"p{q} {c[f'p{q}_s']:.2f} s" for q in PERCENTILES) + f", max {c['max_s']:.2f} s"
         " (after activation, successful flights)",
         "first in the tube   " + ", ".join(f"p{q} {a[f'p{q}_s']:.2f} s" for q in PERCENTILES) + f", max {a['max_s']:.2f} s",
     ]
@@ -185,8 +185,8 @@ def write_json(data: Mapping[str, Any], path: Path) -> None:
 
 
 def roa_plot(rows: Sequence[Mapping[str, Any]], path: Path, title: str, dpi: int = 110) -> Path:
-    """Region of attraction: initial distance vs speed coloured by convergence time (failures: red
-    crosses), and convergence time vs initial distance. PNG, matplotlib's Agg backend."""
+    """Region of attraction: initial distance vs speed coloured by the time to be caught (failures: red
+    crosses), and that time vs initial distance. PNG, matplotlib's Agg backend."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -196,10 +196,10 @@ def roa_plot(rows: Sequence[Mapping[str, Any]], path: Path, title: str, dpi: int
     bad = [r for r in rows if not r["success"]]
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
     if ok:
-        sc = ax.scatter([r["distance_m"] for r in ok], [r["speed_m_s"] for r in ok], c=[r["convergence_time_s"] for r in ok],
-                        s=14, cmap="viridis", label=f"converged ({len(ok)})")  # fmt: skip
-        fig.colorbar(sc, ax=ax, label="convergence time (s)")
-        sc2 = ax2.scatter([r["distance_m"] for r in ok], [r["convergence_time_s"] for r in ok], s=10,
+        sc = ax.scatter([r["distance_m"] for r in ok], [r["speed_m_s"] for r in ok], c=[r["caught_time_s"] for r in ok],
+                        s=14, cmap="viridis", label=f"caught ({len(ok)})")  # fmt: skip
+        fig.colorbar(sc, ax=ax, label="time to be caught (s)")
+        sc2 = ax2.scatter([r["distance_m"] for r in ok], [r["caught_time_s"] for r in ok], s=10,
                           c=[r["speed_m_s"] for r in ok], cmap="plasma")  # fmt: skip
         fig.colorbar(sc2, ax=ax2, label="initial speed (m/s)")
     if bad:
@@ -210,8 +210,8 @@ def roa_plot(rows: Sequence[Mapping[str, Any]], path: Path, title: str, dpi: int
     ax.set_title(title)
     ax.legend(loc="upper right")
     ax2.set_xlabel("initial distance from the path (m)")
-    ax2.set_ylabel("convergence time (s)")
-    ax2.set_title("convergence time vs distance (converged flights)")
+    ax2.set_ylabel("time to be caught (s)")
+    ax2.set_title("time to be caught vs distance (caught flights)")
     for a in (ax, ax2):
         a.grid(True, alpha=0.3)
     fig.savefig(path, dpi=dpi)

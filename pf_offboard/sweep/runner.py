@@ -35,14 +35,15 @@ MAX_WORKERS = 256
 class FlightSettings:
     """How each sweep flight is flown and judged.
 
-    Converged: at the first active step with cross-track <= ``tube_m`` (and, when given,
+    Caught (the sweep's own criterion, not the flight summary's convergence): at the first active
+    step with cross-track <= ``tube_m`` (and, when given,
     ``|eta2 - eta2_ref| <= speed_tol_m_s``) after which the cross-track never again exceeds
-    ``stay_m`` (a tube with hysteresis); the convergence time counts from activation (the first
-    setpoint). A flight succeeds when it converged at least ``settle_s`` before the end and never
+    ``stay_m`` (a tube with hysteresis); the catch time counts from activation (the first
+    setpoint). A flight succeeds when it was caught at least ``settle_s`` before the end and never
     touched the ground. Two tubes, not one: a realistic vehicle's estimate is noisy (px4-sih:
     cross-track p99 ≈ 0.55 m in steady flight), so the last entry into one tight tube would
     measure the noise, and one wide tube alone would call a fast start that merely passes the
-    path converged.
+    path caught.
     """
 
     vehicle: str = "px4-sih"
@@ -210,7 +211,7 @@ def finish_row(row: dict[str, Any], s: FlightSettings, reason: str, crashed: boo
         else:
             success, reason = False, f"{reason}; never within {s.tube_m:g} m of the path"
     elif sim_time_s - conv < s.settle_s - 1e-9:
-        success, reason = False, f"{reason}; converged only {sim_time_s - conv:.2f} s before the end"
+        success, reason = False, f"{reason}; caught only {sim_time_s - conv:.2f} s before the end"
     else:
         success = True
     row.update(_outcome(success, crashed, ground, reason, act, None if conv is None or act is None else conv - act,
@@ -227,7 +228,7 @@ def _outcome(success: bool, crashed: bool, ground: bool, reason: str, activation
         "crashed": crashed,
         "ground_contact": ground,
         "activation_time_s": nan if activation is None else activation,
-        "convergence_time_s": nan if conv is None else conv,  # after activation; NaN if not converged
+        "caught_time_s": nan if conv is None else conv,  # after activation; NaN if not converged
         "cross_track_max_m": nan if ct_max is None else ct_max,  # over every active step
         "cross_track_max_after_m": ct_max_after,  # from convergence on (NaN if not converged)
         "cross_track_rms_after_m": ct_rms_after,

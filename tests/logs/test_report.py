@@ -11,6 +11,7 @@ import pytest
 
 from pf_offboard.cli import main
 from pf_offboard.logs.plot import Fence, fence_from_config, make_figures, plot_map, load_run
+from pf_offboard.logs.measures import WindowFigures
 from pf_offboard.logs.summary import FlightSummary, report_json
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "geo"
@@ -34,7 +35,9 @@ def test_sim_writes_summary_json_and_prints_it_with_json(tmp_path, capsys) -> No
     assert written["schema"] == 1 and written["command"] == "sim" and written["exit_code"] == 0
     s = written["summary"]
     assert s["convergence_time_s"] is not None and 0.0 <= s["convergence_time_s"] < 4.0
-    assert s["cross_track_rms_m"] < 0.05 and s["steps"] == 201
+    assert s["whole_flight"]["cross_track_rms_m"] < 0.05 and s["steps"] == 201
+    assert s["from_activation_plus_8s"] is None  # a 4 s flight has no such window
+    assert s["whole_flight"]["window"] == "whole flight" and s["whole_flight"]["speed_error_rms_m_s"] is not None
     assert written["path_file"]["origin"] == {"lat_deg": -35.363261, "lon_deg": 149.16523, "alt_amsl_m": 584.0}
     assert written["path_file"]["altitude_reference"] == "relative_home"
     # the log's config copy is local and self-contained: replay rebuilds the flown path bit for bit
@@ -44,9 +47,11 @@ def test_sim_writes_summary_json_and_prints_it_with_json(tmp_path, capsys) -> No
 
 
 def test_report_json_is_strict() -> None:
-    s = FlightSummary(1.0, 2, 0, None, None, None, None, math.nan, {"sat_tilt": 0.0}, (), ())
+    w = WindowFigures("whole flight", 0.0, 1.0, 2, 0.1, 0.2, math.nan, math.nan, math.inf, None, None)
+    s = FlightSummary(1.0, 2, 2, 0.0, None, None, w, {"sat_tilt": 0.0}, (), ())
     text = report_json({"summary": s.to_dict()})
-    assert "NaN" not in text and json.loads(text)["summary"]["speed_error_rms_m_s"] is None
+    assert "NaN" not in text and "Infinity" not in text
+    assert json.loads(text)["summary"]["whole_flight"]["speed_error_rms_m_s"] is None
 
 
 def test_plot_draws_the_map_view_with_the_fence(tmp_path, capsys) -> None:

@@ -1,4 +1,4 @@
-"""Flight summary: convergence figures, and whole-flight figures that never say only "n/a"."""
+"""Flight summary: one convergence rule, two named windows, the speed along the path from the position."""
 
 from __future__ import annotations
 
@@ -24,32 +24,67 @@ def record(t: float, cross_track_m: float, eta2_m_s: float, active: bool = True,
 
 
 def test_whole_flight_figures_when_convergence_never_holds() -> None:
-    """A real vehicle hovering on GPS: cross-track 8-20 cm, never within 5 cm: the convergence
-    figures are n/a, the whole-flight ones are printed."""
+    """A real vehicle hovering on GPS: cross-track 11-20 cm, never within 10 cm for 1 s: no
+    convergence, but both windows' figures are printed, each naming its window."""
     rng = np.random.default_rng(0)
-    ct = rng.uniform(0.08, 0.2, 500)
+    ct = rng.uniform(0.11, 0.2, 500)
     speed_err = rng.normal(-0.1, 0.2, 500)
     recs = [record(0.0, 0.5, 0.0, active=False)] + [record(0.02 * (k + 1), ct[k], -1.5 + speed_err[k]) for k in range(500)]
     s = summarize(recs)
-    assert s.convergence_time_s is None and s.cross_track_rms_m is None
-    assert s.whole_cross_track_rms_m == pytest.approx(math.sqrt(np.mean(ct**2)))
-    assert s.whole_cross_track_max_m == pytest.approx(ct.max())
-    assert s.whole_speed_error_rms_m_s == pytest.approx(math.sqrt(np.mean(speed_err**2)))
-    assert s.whole_speed_error_mean_m_s == pytest.approx(np.mean(speed_err))
+    assert s.convergence_time_s is None and s.whole is not None and s.settled is not None
+    assert s.whole.cross_track_rms_m == pytest.approx(math.sqrt(np.mean(ct**2)))
+    assert s.whole.cross_track_max_m == pytest.approx(ct.max())
+    assert s.whole.estimator_speed_error_rms_m_s == pytest.approx(math.sqrt(np.mean(speed_err**2)))
+    assert s.whole.estimator_speed_error_mean_m_s == pytest.approx(np.mean(speed_err))
+    late = np.array([r.time_s >= 0.02 + 8.0 for r in recs[1:]])
+    assert s.settled.cross_track_rms_m == pytest.approx(math.sqrt(np.mean(ct[late] ** 2)))
+    assert s.whole.speed_error_rms_m_s is None  # no path given: no position-derived speed
     whole = [line for line in s.lines() if line.startswith("whole flight")]
-    assert len(whole) == 1 and "n/a" not in whole[0]
-    assert f"{s.whole_cross_track_rms_m:.4f} m" in whole[0] and f"{s.whole_speed_error_mean_m_s:+.4f} m/s" in whole[0]
+    settled = [line for line in s.lines() if line.startswith("from activation + 8 s")]
+    assert len(whole) == 1 and len(settled) == 1
+    assert f"cross-track RMS {100 * s.whole.cross_track_rms_m:.2f} cm" in whole[0]
+    assert f"mean {100 * s.whole.estimator_speed_error_mean_m_s:+.2f} cm/s" in whole[0]
+    assert any(line.startswith("converged") and "never" not in line and "n/a" in line for line in s.lines())
 
 
-def test_whole_flight_includes_the_approach() -> None:
-    recs = [record(0.1 * k, 1.0 if k < 10 else 0.01, -1.5) for k in range(100)]
+def test_convergence_is_the_first_second_within_10_cm() -> None:
+    """1 m off for 1 s, 8 cm for 0.5 s, 12 cm once, then 1 cm: converged where the 1 cm stretch
+    begins (the 8 cm stretch is too short), and the windows include the approach or not."""
+    cts = [1.0] * 10 + [0.08] * 5 + [0.12] + [0.01] * 104
+    recs = [record(0.1 * k, c, -1.5) for k, c in enumerate(cts)]
     s = summarize(recs)
-    assert s.cross_track_rms_m == pytest.approx(0.01)  # after convergence
-    assert s.whole_cross_track_rms_m == pytest.approx(math.sqrt((10 * 1.0 + 90 * 1e-4) / 100))
-    assert s.whole_cross_track_max_m == 1.0
+    assert s.convergence_time_s == pytest.approx(1.6)
+    assert s.whole is not None and s.settled is not None
+    assert s.whole.cross_track_rms_m == pytest.approx(math.sqrt(np.mean(np.square(cts))))
+    assert s.whole.cross_track_max_m == 1.0
+    assert s.settled.cross_track_rms_m == pytest.approx(0.01) and s.settled.start_s == 8.0
+    assert s.settled.samples == sum(1 for k in range(len(cts)) if 0.1 * k >= 8.0 - 1e-12)
 
 
-def test_no_active_steps_whole_flight_is_na() -> None:
+def test_speed_from_the_position_not_the_estimators_velocity() -> None:
+    """The vehicle moves at 1.4 m/s along a straight path (+x) while the estimator says 1.5: the
+    speed error from the position is -0.1 m/s, the estimator's 0 (reported beside it)."""
+    recs = []
+    for k in range(1200):  # 12 s at 100 Hz
+        t = 0.01 * k
+        r = record(t, 0.01, 1.5, speed_ref_m_s=1.5)
+        recs.append(StepRecord(**{**r.__dict__, "position_enu_m": (1.4 * t, 0.0, 2.0)}))
+    s = summarize(recs, tangent=lambda lam: np.array([1.0, 0.0, 0.0]))
+    for w in (s.settled, s.whole):
+        assert w is not None
+        assert w.speed_mean_m_s == pytest.approx(1.4, abs=1e-9)
+        assert w.speed_error_mean_m_s == pytest.approx(-0.1, abs=1e-9)
+        assert w.speed_error_rms_m_s == pytest.approx(0.1, abs=1e-9)
+        assert w.estimator_speed_error_rms_m_s == pytest.approx(0.0, abs=1e-12)
+    # the first and last 0.1 s have no central difference: left out of the speed, kept for the rest
+    assert s.whole is not None and s.whole.samples == 1200
+    # flown backwards along the path (reference -1.4): the mean speed is along the direction of travel
+    back = [StepRecord(**{**r.__dict__, "position_enu_m": (-r.position_enu_m[0], 0.0, 2.0), "speed_ref_m_s": -1.4}) for r in recs]
+    w = summarize(back, tangent=lambda lam: np.array([1.0, 0.0, 0.0])).whole
+    assert w is not None and w.speed_mean_m_s == pytest.approx(1.4) and w.speed_error_rms_m_s == pytest.approx(0.0, abs=1e-9)
+
+
+def test_no_active_steps_windows_are_na() -> None:
     s = summarize([record(0.0, 0.3, 0.0, active=False), record(0.1, 0.3, 0.0, active=False)])
-    assert s.whole_cross_track_rms_m is None
+    assert s.whole is None and s.settled is None and s.whole_cross_track_rms_m is None
     assert any(line.startswith("whole flight") and "n/a" in line for line in s.lines())

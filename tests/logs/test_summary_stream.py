@@ -2,53 +2,48 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from pf_offboard.config import load_config
+from pf_offboard.logs.measures import path_tangent, tracking_of_records
 from pf_offboard.logs.steplog import read_steplog
 from pf_offboard.logs.summary import MAX_EVENTS, SAT_FLAGS, SummaryAccumulator
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 
-def _batch(records, tol_ct=0.05, tol_v=0.1):
-    """The definitions written directly over the list (the reference)."""
-    t = np.array([r.time_s for r in records])
-    active = np.array([r.active for r in records])
-    dt = np.diff(t, append=t[-1])
-    sat = {k: float(np.sum(dt[active & np.array([getattr(r, k) for r in records])])) for k in SAT_FLAGS}
-    idx = np.flatnonzero(active)
-    ct = np.array([r.cross_track_m for r in records])[idx]
-    err = np.array([r.eta2_m_s - r.speed_ref_m_s for r in records])[idx]
-    good = (ct <= tol_ct) & (np.abs(err) <= tol_v)
-    bad = np.flatnonzero(~good)
-    first = 0 if bad.size == 0 else int(bad[-1]) + 1
-    if first >= idx.size:
-        return sat, None, None, None
-    return sat, float(t[idx[first]] - t[idx[0]]), math.sqrt(np.mean(ct[first:] ** 2)), float(np.max(ct[first:]))
-
-
 @pytest.mark.parametrize("log", sorted(DATA.glob("*.csv.gz")), ids=lambda p: p.name)
 def test_streamed_summary_matches_the_definition(log) -> None:
+    """The accumulator (constant memory, a 0.2 s delay line for the position's derivative) equals
+    :func:`pf_offboard.logs.measures.tracking` over the whole list, and its saturation times the
+    definition written directly."""
     records = read_steplog(log)
-    # also a late bad step: convergence restarts, the sums must restart with it
+    tangent = path_tangent(load_config(log.with_name(log.name.removesuffix(".csv.gz") + ".yaml")).path.spline())
+    # also a late bad step (it does not undo convergence) and an early one
     spoiled = records[:-50] + [type(records[0])(**{**records[-50].__dict__, "cross_track_m": 1.0})] + records[-49:]
     for recs in (records, spoiled):
-        acc = SummaryAccumulator()
+        acc = SummaryAccumulator(tangent, settle_s=2.0)  # the golden flights are short
         for r in recs:
             acc.add(r)
         s = acc.result()
-        sat, conv, rms, mx = _batch(recs)
-        assert s.steps == len(recs)
+        ref = tracking_of_records(recs, tangent, settle_s=2.0)
+        assert ref is not None and s.steps == len(recs)
+        t = np.array([r.time_s for r in recs])
+        active = np.array([r.active for r in recs])
+        dt = np.diff(t, append=t[-1])
+        sat = {k: float(np.sum(dt[active & np.array([getattr(r, k) for r in recs])])) for k in SAT_FLAGS}
         assert s.saturation_s == pytest.approx(sat)
-        if conv is None:
-            assert s.convergence_time_s is None
-        else:
-            assert s.convergence_time_s == pytest.approx(conv, abs=1e-12)
-            assert s.cross_track_rms_m == pytest.approx(rms, rel=1e-12) and s.cross_track_max_m == mx
+        assert s.convergence_time_s == (None if ref.convergence_time_s is None else pytest.approx(ref.convergence_time_s, abs=1e-12))
+        for got, want in ((s.settled, ref.settled), (s.whole, ref.whole)):
+            assert (got is None) == (want is None)
+            if got is not None:
+                assert got.samples == want.samples and got.window == want.window
+                for k in ("cross_track_rms_m", "cross_track_max_m", "speed_mean_m_s", "speed_error_rms_m_s", "estimator_speed_error_rms_m_s"):
+                    assert getattr(got, k) == pytest.approx(getattr(want, k), rel=1e-9, abs=1e-12), k
+        assert s.whole is not None and s.whole.speed_error_rms_m_s is not None
 
 
 def test_events_are_bounded() -> None:

@@ -19,7 +19,7 @@ TINY_FLAGS = ["--vehicle", "fast", "--duration", "1.5", "--rate", "50", "--settl
 def test_a_tiny_sweep_writes_table_summary_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["sweep", "--config", str(PAPER), "--out", str(tmp_path), "--flights", "2", *TINY_FLAGS]) == 0
     out, err = capsys.readouterr()
-    assert "2 flights in" in out and "convergence time" in out and "2/2" in err
+    assert "2 flights in" in out and "caught after" in out and "2/2" in err
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["flights"] == 2 and summary["executor"] == "serial" and summary["engine"] == "batch" and summary["settings"]["ranges"]["max_speed_m_s"] == 1.0
     assert (tmp_path / "flights.csv").read_text().count("\n") == 3

@@ -52,9 +52,9 @@ def test_ranking_success_first_then_convergence_time() -> None:
     cands = [gains.GainCandidate(i, 1.0 + i, 0.8) for i in range(3)]
 
     def row(gid: int, ok: bool, t: float) -> dict[str, object]:
-        return {"gains_id": gid, "success": ok, "convergence_time_s": t if ok else math.nan, "cross_track_rms_after_m": 0.1}
+        return {"gains_id": gid, "success": ok, "caught_time_s": t if ok else math.nan, "cross_track_rms_after_m": 0.1}
 
     rows = [row(0, True, 3.0), row(0, True, 3.0), row(1, True, 1.0), row(1, False, 0.0), row(2, True, 2.0), row(2, True, 2.5)]
     ranked = gains.rank(rows, cands)
     assert [r["gains_id"] for r in ranked] == [2, 0, 1] and [r["rank"] for r in ranked] == [1, 2, 3]
-    assert ranked[2]["success_rate"] == 0.5 and ranked[2]["convergence_p90_s"] == math.inf
+    assert ranked[2]["success_rate"] == 0.5 and ranked[2]["caught_p90_s"] == math.inf

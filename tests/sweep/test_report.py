@@ -19,7 +19,7 @@ from .helpers import PAPER, TINY, tiny_spec
 
 
 def _row(i: int, ok: bool, t: float, reason: str = "duration 15 s reached") -> dict[str, object]:
-    return {"flight": i, "success": ok, "crashed": False, "ground_contact": False, "convergence_time_s": t if ok else math.nan,
+    return {"flight": i, "success": ok, "crashed": False, "ground_contact": False, "caught_time_s": t if ok else math.nan,
             "first_in_tube_time_s": t / 2 if ok else math.nan,
             "reason": reason, "distance_m": float(i), "speed_m_s": 1.0, "tilt_deg": 10.0, "rate_rad_s": 0.5, "wind_m_s": 1.0,
             "pos_enu_z_m": 3.0, "vel_enu_z_m_s": 0.0}
@@ -31,9 +31,9 @@ def test_statistics_and_failure_kinds() -> None:
              _row(12, False, 0, "duration 15 s reached; within 0.3 m at 1.00 s, then beyond 1 m (max 1.2 m, last at 9 s) and not back by the end")]
     stats = report.summarize(rows)
     assert stats["success_rate"] == pytest.approx(10 / 12)
-    assert stats["convergence_time"]["p50_s"] == pytest.approx(5.5) and stats["convergence_time"]["max_s"] == 10.0
+    assert stats["caught_time"]["p50_s"] == pytest.approx(5.5) and stats["caught_time"]["max_s"] == 10.0
     assert stats["first_in_tube_time"]["p50_s"] == pytest.approx(2.75)
-    assert stats["failures_by_kind"] == {"left the tube after converging": 1, "never converged": 1}
+    assert stats["failures_by_kind"] == {"left the tube after being caught": 1, "never caught": 1}
     assert stats["failed_start_ranges"]["distance_m"] == [11.0, 12.0]
     assert [b["success_rate"] for b in stats["success_rate_by_start"]["distance_m"]][-1] < 1.0
     assert any("failed starts" in line for line in report.lines(stats))
@@ -69,4 +69,4 @@ def test_the_sim_command_flies_the_same_flight(tmp_path: Path) -> None:
     sim_cli.add_arguments(parser)
     assert sim_cli.run(parser.parse_args([*argv[2:-2], "--out", str(tmp_path), "--json"])) == 0
     flown = json.loads((tmp_path / SUMMARY_JSON).read_text())
-    assert flown["summary"]["whole_cross_track_max_m"] == row["cross_track_max_m"]
+    assert flown["summary"]["whole_flight"]["cross_track_max_m"] == row["cross_track_max_m"]

@@ -40,7 +40,7 @@ def test_serial_and_process_pool_give_the_same_rows(tasks, serial_rows) -> None:
     assert [r["flight"] for r in serial_rows] == [0, 1, 2, 3]
     assert all(r["activation_time_s"] < 0.1 for r in serial_rows)  # engaged at the drawn state
     assert all(not r["reason"].startswith("error") for r in serial_rows)
-    assert all(r["first_in_tube_time_s"] <= r["convergence_time_s"] for r in serial_rows if r["success"])
+    assert all(r["first_in_tube_time_s"] <= r["caught_time_s"] for r in serial_rows if r["success"])
 
 
 def test_a_sweep_of_more_flights_repeats_the_first_ones(serial_rows) -> None:  # type: ignore[no-untyped-def]
@@ -57,7 +57,7 @@ def test_no_files_unless_logs_are_asked_for(tmp_path: Path, tasks, serial_rows) 
 
 def test_a_broken_flight_is_a_row_not_a_lost_sweep(tasks) -> None:  # type: ignore[no-untyped-def]
     row = run_flight(dataclasses.replace(tasks[0], config_yaml="path: 3\n"))
-    assert row["success"] is False and row["reason"].startswith("error: ConfigError") and math.isnan(row["convergence_time_s"])
+    assert row["success"] is False and row["reason"].startswith("error: ConfigError") and math.isnan(row["caught_time_s"])
 
 
 def _step(t: float, ct: float, active: bool = True) -> SimpleNamespace:
