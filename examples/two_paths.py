@@ -16,7 +16,7 @@ async def main(endpoint: str) -> None:
     async with pf_offboard.connect(endpoint) as vehicle:
         await vehicle.takeoff(2.0)
         loop = await vehicle.follow(LOOP, speed=1.5, laps=1)
-        print("loop:", loop.reason, f"{loop.cross_track_rms_m:.3f} m")
+        print("loop:", loop.reason, f"{loop.whole_cross_track_rms_m:.3f} m (convergence included)")
         line = await vehicle.follow(LINE, speed=1.0)  # open: ends at the last way-point
         print("line:", line.reason, f"{line.whole_cross_track_rms_m:.3f} m (convergence included)")
         await vehicle.hand_back()
