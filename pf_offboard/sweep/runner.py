@@ -24,6 +24,7 @@ from typing import Any, TextIO
 
 from pf_offboard.errors import InputError
 from pf_offboard.sweep.gains import GainCandidate
+from pf_offboard.sweep.rows import finish_row, outcome
 from pf_offboard.sweep.starts import Start
 
 # Fixed so a kept .tlog is the same file whoever runs the flight (and nothing reads the wall clock).
@@ -186,7 +187,7 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
             flight.summary = judge  # type: ignore[assignment]
             result = flight.run()
         except Exception as exc:  # one broken flight is a row, not a lost sweep
-            row.update(_outcome(False, False, False, f"error: {type(exc).__name__}: {exc}", None, None, math.nan, math.nan, math.nan,
+            row.update(outcome(False, False, False, f"error: {type(exc).__name__}: {exc}", None, None, math.nan, math.nan, math.nan,
                                 math.nan))  # fmt: skip
             row["first_in_tube_time_s"] = math.nan
             return row
@@ -194,47 +195,6 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
     judge_numbers = (judge.activation_s, judge.converged_s, judge.first_converged_s, judge.last_out_s, judge.max_out_m,
                      judge.max_after_m, judge.rms_after_m)  # fmt: skip
     return finish_row(row, s, result.reason, bool(result.crashed), result.sim_time_s, summ.whole_cross_track_max_m, *judge_numbers)
-
-
-def finish_row(row: dict[str, Any], s: FlightSettings, reason: str, crashed: bool, sim_time_s: float, ct_max: float | None,
-               act: float | None, conv: float | None, first: float | None, last: float | None, max_out_m: float,
-               max_after_m: float, rms_after_m: float) -> dict[str, Any]:  # fmt: skip
-    """The row's outcome columns from what a flight produced (shared by both engines: the same
-    numbers give the same row)."""
-    ground = crashed or reason.startswith("on the ground")
-    if ground:
-        success = False
-    elif act is None or conv is None:
-        if first is not None and last is not None:
-            success, reason = False, (f"{reason}; within {s.tube_m:g} m at {first:.2f} s, then beyond {s.stay_m:g} m "
-                                      f"(max {max_out_m:.2f} m, last at {last:.2f} s) and not back by the end")  # fmt: skip
-        else:
-            success, reason = False, f"{reason}; never within {s.tube_m:g} m of the path"
-    elif sim_time_s - conv < s.settle_s - 1e-9:
-        success, reason = False, f"{reason}; caught only {sim_time_s - conv:.2f} s before the end"
-    else:
-        success = True
-    row.update(_outcome(success, crashed, ground, reason, act, None if conv is None or act is None else conv - act,
-                        ct_max, max_after_m if conv is not None else math.nan, rms_after_m, sim_time_s))  # fmt: skip
-    row["first_in_tube_time_s"] = first - act if (first is not None and act is not None) else math.nan
-    return row
-
-
-def _outcome(success: bool, crashed: bool, ground: bool, reason: str, activation: float | None, conv: float | None,
-             ct_max: float | None, ct_max_after: float, ct_rms_after: float, sim_time_s: float) -> dict[str, Any]:  # fmt: skip
-    nan = math.nan
-    return {
-        "success": success,
-        "crashed": crashed,
-        "ground_contact": ground,
-        "activation_time_s": nan if activation is None else activation,
-        "caught_time_s": nan if conv is None else conv,  # after activation; NaN if not converged
-        "cross_track_max_m": nan if ct_max is None else ct_max,  # over every active step
-        "cross_track_max_after_m": ct_max_after,  # from convergence on (NaN if not converged)
-        "cross_track_rms_after_m": ct_rms_after,
-        "sim_time_s": sim_time_s,
-        "reason": reason,
-    }
 
 
 # ---------------------------------------------------------------------------------- progress

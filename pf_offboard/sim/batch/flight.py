@@ -199,7 +199,7 @@ def fly(tasks: Sequence[Any], trace: list[Arr] | None = None) -> tuple[dict[tupl
 
     Returns (rows by task key, the tasks the scalar engine must fly: flights that left the
     mirrored path). ``trace``: gets the true positions (3, N) NED after every step."""
-    from pf_offboard.sweep.runner import finish_row
+    from pf_offboard.sweep.rows import finish_row
 
     setup = _Setup(tasks[0].config_yaml, tasks[0].settings)
     why = setup.unsupported(False)
