@@ -56,6 +56,16 @@ def _free(port: int, kind: int) -> bool:
     return True
 
 
+def _wait_for_mock(mock: subprocess.Popen, timeout_s: float = 10.0) -> None:
+    """Until the mock holds one of its ports (PX4 style UDP 14580, ArduPilot style TCP 5760): a
+    condition, not a fixed wait."""
+    deadline = time.monotonic() + timeout_s
+    while _free(14580, socket.SOCK_DGRAM) and _free(5760, socket.SOCK_STREAM):
+        assert mock.poll() is None, f"sitl-mock exited with {mock.returncode}"
+        assert time.monotonic() < deadline, "sitl-mock did not open its port"
+        time.sleep(0.02)
+
+
 def _summaries(cwd: Path, before: set[Path]) -> list[Path]:
     return sorted(set(cwd.rglob("summary.json")) - before)
 
@@ -91,7 +101,7 @@ def test_every_command_of_the_guide_runs(tmp_path, monkeypatch, capsys) -> None:
                     mock.wait(10)
                 mock = subprocess.Popen([str(bin_dir / "sitl-mock"), *argv[1:], "--speed", "2"], cwd=tmp_path, env=env,
                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
-                time.sleep(1.0)
+                _wait_for_mock(mock)
                 continue
             before = set(tmp_path.rglob("summary.json"))
             started = time.monotonic()
