@@ -50,6 +50,9 @@ _STATE_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MS
 _HEARTBEAT_HZ = 10.0  # like fly: a takeover shows within 0.1 s
 
 
+# a duration shorter than this is no flight (1e-320 s is not a duration): refused like fly's --duration
+MIN_DURATION_S = 0.01
+
 @dataclass(frozen=True)
 class SimSpec:
     """One simulated flight. Positions / velocities are world ENU (z up), metres and m/s."""
@@ -230,8 +233,8 @@ def _check(spec: SimSpec) -> None:
     if spec.start_enu_m is not None and spec.throw_enu is not None:
         raise InputError("--throw", "give either --start (hover) or --throw, not both")
     _check_throw(spec)
-    if spec.duration_s is not None and not (math.isfinite(spec.duration_s) and 0.0 < spec.duration_s <= 3600.0):
-        raise InputError("--duration", f"must be in (0, 3600] s, got {spec.duration_s}")
+    if spec.duration_s is not None and not (math.isfinite(spec.duration_s) and MIN_DURATION_S <= spec.duration_s <= 3600.0):
+        raise InputError("--duration", f"must be in [{MIN_DURATION_S:g}, 3600] s, got {spec.duration_s}")
     if spec.laps is not None and not (math.isfinite(spec.laps) and 0.0 < spec.laps <= 1000.0):
         raise InputError("--laps", f"must be in (0, 1000], got {spec.laps}")
     if spec.rate_hz is not None and not (math.isfinite(spec.rate_hz) and 20.0 <= spec.rate_hz <= MAX_RATE_HZ):

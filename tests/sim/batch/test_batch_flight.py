@@ -62,10 +62,13 @@ def test_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(vehicle: 
 
 
 def test_the_engines_give_the_same_table_for_a_gain_sweep_and_unmirrored_flights() -> None:
+    from pf_offboard.sweep import StartRanges, SweepSpec
     from pf_offboard.sweep.gains import candidates
-    from tests.sweep.helpers import tiny_spec
 
-    spec = dataclasses.replace(tiny_spec(3), gains=tuple(candidates("grid", (2.0, 4.0), (0.7, 1.0), 2, 0)))
+    # three short starts on the fast preset (tests/sweep/helpers.py's tiny sweep), a 2 x 2 gain grid
+    tiny = FlightSettings(vehicle="fast", duration_s=1.5, rate_hz=50.0, tube_m=0.3, stay_m=1.0, settle_s=0.2)
+    spec = SweepSpec(flights=3, seed=7, ranges=StartRanges(max_distance_m=1.0, max_speed_m_s=1.0), settings=tiny,
+                     gains=tuple(candidates("grid", (2.0, 4.0), (0.7, 1.0), 2, 0)))  # fmt: skip
     tasks = plan.tasks(PAPER, spec)
     # ArduPilot is not mirrored: those flights go to the scalar engine
     other = [dataclasses.replace(tasks[0], settings=dataclasses.replace(tasks[0].settings, autopilot="ardupilot"),
