@@ -145,7 +145,7 @@ def test_cli_sim_replay_plot(tmp_path: Path, soft_paper: Path, capsys: pytest.Ca
         (["--throw", "1,2,-1,0,0,5"], "--throw: z (up) must be > 0 m"),
         (["--start", "0,0,nan"], "--start: values must be finite"),
         (["--start", "0,0,0"], "--start: z (up) must be > 0.2 m"),
-        (["--duration", "-1"], "--duration: must be in (0, 3600] s"),
+        (["--duration", "-1"], "--duration: must be in [0.01, 3600] s"),
         (["--rate", "1000"], "--rate: must be in [20, 250] Hz"),
         (["--name", "../x"], "--name: must be a plain file stem"),
         (["--seed", "-1"], "--seed: must be an integer in [0, 2^63)"),
