@@ -550,6 +550,16 @@ class PathFollower:
             if not _finite(y, v):
                 comp.reset()
                 y, v = y_meas, v_meas
+        lam_meas: float | None = None
+        if comp is not None:
+            # the measured state's closest point first; the law's (at the prediction) is searched
+            # from it, so both stay on one branch: on a helix whose turns are closer than the
+            # vehicle's offset, separate global searches put them on neighbouring turns (the law
+            # then slowed for the end one turn early and the vehicle stalled between turns)
+            lam_meas = float(self._measured_projector.update(y_meas))
+            seed = getattr(self.projector, "seed", None)
+            if seed is not None:
+                seed(lam_meas, y, y_meas)
         lam, s, terms = self._terms(y, v)
         ramp = self._ramp
         if not ramp.done:
@@ -596,7 +606,8 @@ class PathFollower:
             raise InputError("state", f"no finite command at position {list(y)}, velocity {list(v)}")
         if comp is not None:
             # report the measured state, not the prediction the law acted on
-            lam = float(self._measured_projector.update(y_meas))
+            assert lam_meas is not None
+            lam = lam_meas
             sm = self._eval(lam)
             dist = math.sqrt((y_meas[0] - sm[0]) ** 2 + (y_meas[1] - sm[1]) ** 2 + (y_meas[2] - sm[2]) ** 2)
             mt = evaluate_terms(self.path, lam, y_meas, v_meas)

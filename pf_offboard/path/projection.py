@@ -153,6 +153,30 @@ class Projector:
         return best_lam, best_d2
 
     # ------------------------------------------------------------------ public
+    def seed(self, lam: float, position_enu_m: ArrayLike, near_enu_m: ArrayLike) -> None:
+        """Warm-start the next :meth:`update` (of ``position_enu_m``) from another projection: ``lam``,
+        the closest point of the nearby ``near_enu_m`` (m, ENU), moved along the path's tangent by
+        the first-order share of ``position_enu_m - near_enu_m``. The next update then searches
+        around it on the same branch, never globally: two projections of points a fraction of a
+        metre apart (a measured state and its prediction) stay on one branch, also where two
+        branches are closer than the points' distance to them (a tight helix's turns)."""
+        q = position_enu_m.tolist() if isinstance(position_enu_m, np.ndarray) else position_enu_m
+        n = near_enu_m.tolist() if isinstance(near_enu_m, np.ndarray) else near_enu_m
+        x, y, z = float(q[0]), float(q[1]), float(q[2])
+        if not (math.isfinite(lam) and all(math.isfinite(float(c)) for c in (*q, *n))):
+            raise InputError("position_enu_m", f"not finite: {[x, y, z]} (seed {lam!r})")
+        s = self._eval2(lam % self._lam_max if self._closed else lam)
+        d1 = (s[3], s[4], s[5])
+        sp2 = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
+        shift = ((x - float(n[0])) * d1[0] + (y - float(n[1])) * d1[1] + (z - float(n[2])) * d1[2]) / sp2 if sp2 > 0.0 else 0.0
+        start = lam + shift
+        if not self._closed:
+            start = min(max(start, 0.0), self._lam_max)
+        self._lam = start
+        self._y = (x, y, z)
+        self._dlam = 0.0
+        self._count = 0
+
     def update(self, position_enu_m: ArrayLike) -> float:
         """lambda* for the position (m, ENU); warm-started from the previous call."""
         p = position_enu_m.tolist() if isinstance(position_enu_m, np.ndarray) else position_enu_m

@@ -258,3 +258,33 @@ def test_random_paths_fresh_projection_is_global(seed):
         lam = proj.update(y)
         _, d_ref = brute_force(path, y)
         assert dist(path, lam, y) <= d_ref + 1e-9
+
+
+def _tight_helix() -> Path:
+    """Turns 0.4 m apart (radius 1.25 m): a point 0.2 m off one turn is as near the next."""
+    import math
+
+    pts = [[1.25 * math.cos(i * math.pi / 5), 1.25 * math.sin(i * math.pi / 5), 1.6 + 0.04 * i] for i in range(41)]
+    return Path(np.array(pts), closed=False, frame="auto")
+
+
+def test_seed_keeps_a_nearby_point_on_the_seeding_branch() -> None:
+    path = _tight_helix()
+    below = np.array([1.0, 0.0, 2.17])  # 0.17 m above the turn at z 2.0, 0.23 m below the one at 2.4
+    above = below + np.array([0.0, 0.0, 0.1])  # nearer the upper turn
+    lam_below = Projector(path).update(below)
+    lam_alone = Projector(path).update(above)
+    assert abs(path.eval_floats(lam_below)[2] - 2.0) < 0.05 and abs(path.eval_floats(lam_alone)[2] - 2.4) < 0.05
+    seeded = Projector(path)
+    seeded.seed(lam_below, above, below)
+    lam = seeded.update(above)
+    assert abs(lam - lam_below) < 0.3  # the lower turn, not the nearer upper one
+    # and a point ahead along the path is found ahead on that branch (the seed moves along the tangent)
+    ahead = np.asarray(path.eval_floats(lam_below + 0.7)[0:3]) + np.array([0.0, 0.0, 0.17])
+    seeded.seed(lam_below, ahead, below)
+    assert abs(seeded.update(ahead) - (lam_below + 0.7)) < 0.05
+
+
+def test_seed_refuses_non_finite() -> None:
+    with pytest.raises(InputError, match="position_enu_m"):
+        Projector(_tight_helix()).seed(float("nan"), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
