@@ -399,6 +399,19 @@ def in_namespace(spec_file: Path) -> list[str]:
     return ["unshare", "-n", "bash", "-c", inner]
 
 
+def _lap_times(spec: dict[str, Any]) -> str:
+    """The flight's lap times beside the point-mass bound at the vehicle's limits, from the
+    summary.json fly wrote ("" without them: an open path, or an app that did not write them)."""
+    try:
+        summary = json.loads((Path(spec["workdir"]) / "log" / "summary.json").read_text()).get("summary") or {}
+    except (OSError, ValueError, KeyError):
+        return ""
+    laps, bound = summary.get("lap_times_s") or [], summary.get("lap_time_bound_s")
+    if not laps or bound is None:
+        return ""
+    return f"lap times {', '.join(f'{x:.2f}' for x in laps)} s (the first from activation); point-mass bound {bound:.2f} s"
+
+
 def row(result: dict[str, Any]) -> str:
     spec = result["spec"]
     tr = result.get("tracking") or {}
@@ -412,6 +425,9 @@ def row(result: dict[str, Any]) -> str:
     if result.get("past_the_end"):
         pe = result["past_the_end"]
         line += f"\n{'':38s}(window ends at the open path's end; after it: overshoot {cm(pe['overshoot_m'])} cm, cross-track max {cm(pe['cross_track_max_m'])} cm over {pe['duration_s']:.1f} s)"
+    laps = _lap_times(spec)
+    if laps:
+        line += f"\n{'':38s}{laps}"
     t = result.get("truth")
     if t and "error" not in t:
         w = t.get("truth") or {}

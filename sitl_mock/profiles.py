@@ -125,6 +125,9 @@ PX4_PARAMS: tuple[ParamSpec, ...] = (
 )
 
 ARDUPILOT_PARAMS: tuple[ParamSpec, ...] = (
+    # ArduPilot's default is 1 (the collective sent with an attitude / rate target is divided by
+    # cos(target tilt)); the mock flies the thrust as sent, and says so
+    ParamSpec("ATC_ANGLE_BOOST", 0, ParamType.INT32),
     ParamSpec("DISARM_DELAY", 10, ParamType.INT32),  # s, auto-disarm on the ground
     ParamSpec("FRAME_CLASS", 1, ParamType.INT32),
     ParamSpec("GUID_OPTIONS", 0, ParamType.INT32),

@@ -540,6 +540,9 @@ class Vehicle:
                 from pf_offboard.logs.measures import path_tangent
 
                 summary_acc.tangent = path_tangent(path)  # the speed along the path from the position
+                from pf_offboard.logs.summary import time_laps_of
+
+                time_laps_of(summary_acc, follower)  # closed path: lap times beside the point-mass bound
                 length, closed, lam_max = path.length_m, path.closed, path.lam_max
                 safety = getattr(config, "safety", None) or SafetyConfig()
                 fence = fence if fence is not None else envelope_fence(config)

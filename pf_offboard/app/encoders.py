@@ -49,6 +49,9 @@ MAV_FRAME_LOCAL_NED = 1
 _HOLD_DAMPING_1_S = 1.0  # velocity damping of the acceleration-mode hold (1/s)
 _HOLD_ACCEL_MAX_M_S2 = 3.0
 _THRUST_PROJECTION_FLOOR = 0.3  # rates mode: keep >= 30 % of the demand while the tilt is still far off
+# ArduPilot's angle boost divides the collective by cos(target tilt), the cosine floored at 0.1
+# (AC_AttitudeControl_Multi::get_throttle_boosted)
+_ANGLE_BOOST_COS_FLOOR = 0.1
 # tilt_from_gravity_setpoint: the vertical specific force (g + a_up) it divides by, at least g / 4
 # (a demand near free fall; the autopilot's tilt limit then bounds what is flown)
 _TILT_FROM_GRAVITY_FLOOR = 0.25
@@ -176,6 +179,7 @@ class Encoder:
         rate_law: AttitudeRateLaw | None = None,
         max_body_rate_rad_s: float | None = None,
         tilt_from_gravity: bool | None = None,
+        thrust_angle_boost: bool = False,
     ) -> None:
         if output_mode not in ("acceleration", "attitude", "rates"):
             raise ValueError(f"unknown output mode {output_mode!r}")
@@ -196,21 +200,37 @@ class Encoder:
             raise ValueError(f"max_body_rate_rad_s must be positive, got {max_body_rate_rad_s}")
         self.max_body_rate_rad_s = max_body_rate_rad_s
         self.tilt_from_gravity = profile.accel_tilt_from_gravity if tilt_from_gravity is None else bool(tilt_from_gravity)
+        # attitude / rates: the autopilot divides the thrust sent by cos(its target tilt) (ArduPilot's
+        # ATC_ANGLE_BOOST = 1), so the encoder multiplies it by that cosine: the thrust flown is the
+        # core's (measured on ArduCopter SITL without it: vertical acceleration = thrust - g, not
+        # thrust cos(tilt) - g; 0.8 m/s^2 too much at 22 deg tilt)
+        self.thrust_angle_boost = bool(thrust_angle_boost)
 
     def with_hover_thrust(self, hover_thrust: float) -> Encoder:
         """The same encoder with the hover thrust read from the autopilot (validated like __init__)."""
-        return self._with(hover_thrust, self.tilt_from_gravity)
+        return self._with(hover_thrust, self.tilt_from_gravity, self.thrust_angle_boost)
 
     def with_tilt_from_gravity(self, tilt_from_gravity: bool) -> Encoder:
         """The same encoder with the autopilot's tilt mapping as read from it (``accel_tilt_param``)."""
-        return self._with(self.hover_thrust, tilt_from_gravity)
+        return self._with(self.hover_thrust, tilt_from_gravity, self.thrust_angle_boost)
 
-    def _with(self, hover_thrust: float, tilt_from_gravity: bool) -> Encoder:
+    def with_thrust_angle_boost(self, thrust_angle_boost: bool) -> Encoder:
+        """The same encoder knowing whether the autopilot boosts the thrust by 1 / cos(tilt)
+        (``thrust_angle_boost_param`` as read from it)."""
+        return self._with(self.hover_thrust, self.tilt_from_gravity, thrust_angle_boost)
+
+    def _with(self, hover_thrust: float, tilt_from_gravity: bool, thrust_angle_boost: bool) -> Encoder:
         return Encoder(
             self.output_mode, self.profile, self.target_system, self.target_component,
             hover_thrust=hover_thrust, rate_law=self.rate_law, max_body_rate_rad_s=self.max_body_rate_rad_s,
-            tilt_from_gravity=tilt_from_gravity,
+            tilt_from_gravity=tilt_from_gravity, thrust_angle_boost=thrust_angle_boost,
         )  # fmt: skip
+
+    def _unboost(self, thrust_m_s2: float, q_target_enu_flu: Any) -> float:
+        """The thrust to send so that the autopilot's angle boost (if any) flies ``thrust_m_s2``."""
+        if not self.thrust_angle_boost:
+            return thrust_m_s2
+        return thrust_m_s2 * max(float(body_z(np.asarray(q_target_enu_flu, dtype=float))[2]), _ANGLE_BOOST_COS_FLOOR)
 
     def _accel_ned(self, accel_enu_m_s2: Any) -> NDArray[np.float64]:
         """An acceleration setpoint as sent (NED): what the autopilot flies is ``accel_enu_m_s2``."""
@@ -262,14 +282,16 @@ class Encoder:
             for bit, used in zip((_ROLL_RATE_IGNORE, _PITCH_RATE_IGNORE, _YAW_RATE_IGNORE_ATT), honoured):
                 mask |= 0 if used else bit
             sent = tuple(float(r) if used else 0.0 for r, used in zip(rates_frd, honoured))
-            thrust = thrust_normalised(float(cmd.thrust), self.hover_thrust)
+            thrust = thrust_normalised(self._unboost(float(cmd.thrust), q_des), self.hover_thrust)
             return Encoded(self._attitude_msg(time_boot_ms, mask, q_des, sent, thrust), thrust, sent)  # type: ignore[arg-type]
         # rates: our own attitude loop closes on the measured attitude
         assert est.q_enu_flu is not None
         rates_flu = self.rate_law.update(q_des, est.q_enu_flu, cmd.body_rates)
         # thrust along the current body z: the part of the demand the vehicle can produce now
         projection = float(np.dot(body_z(q_des), body_z(est.q_enu_flu)))
-        thrust = thrust_normalised(float(cmd.thrust) * max(projection, _THRUST_PROJECTION_FLOOR), self.hover_thrust)
+        # the autopilot's target attitude in rates mode integrates the rates sent: about the measured one
+        produced = float(cmd.thrust) * max(projection, _THRUST_PROJECTION_FLOOR)
+        thrust = thrust_normalised(self._unboost(produced, est.q_enu_flu), self.hover_thrust)
         rates_frd = frames.flu_to_frd(rates_flu)
         sent = (float(rates_frd[0]), float(rates_frd[1]), float(rates_frd[2]))
         if self.max_body_rate_rad_s is not None:

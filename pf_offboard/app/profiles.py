@@ -72,6 +72,9 @@ class Profile:
     accel_tilt_from_gravity: bool = True
     # the parameter that says so (1: tilt from g alone; 0: from the whole demand), or None
     accel_tilt_param: str | None = None
+    # attitude / rates: the parameter that, at 1, makes the autopilot divide the thrust sent by
+    # cos(target tilt) (ArduPilot's ATC_ANGLE_BOOST, default 1), or None (PX4 flies the thrust as sent)
+    thrust_angle_boost_param: str | None = None
     # HEARTBEAT custom_mode bits that identify our mode (PX4: the main mode only; it leaves the
     # sub mode 0 in OFFBOARD)
     offboard_mode_mask: int = 0xFFFFFFFF
@@ -182,6 +185,7 @@ ARDUPILOT = Profile(
     hover_thrust_param="MOT_THST_HOVER",
     attitude_rates_ff=(True, True, True),
     accel_with_velocity=True,
+    thrust_angle_boost_param="ATC_ANGLE_BOOST",
     guid_options=(("attitude", 8), ("rates", 8), ("acceleration", 16)),
     refused_outputs=(("acceleration", _ARDUPILOT_ACCELERATION_REFUSAL),),
     mode_names=ardupilot_mode_name,

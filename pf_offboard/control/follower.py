@@ -24,7 +24,7 @@ from pf_offboard.control.feedforward import (
     quaternion_from_axes,
 )
 from pf_offboard.control.law import BISECTION_STEPS, ControlLaw, LawOutput
-from pf_offboard.control.profile import SpeedProfile, SpeedProfileSpec
+from pf_offboard.control.profile import SpeedProfile, SpeedProfileSpec, vehicle_lap_time_bound
 from pf_offboard.control.transverse import ExactTerms, exact_terms
 from pf_offboard.control.tuning import gains_for_vehicle
 from pf_offboard.control.types import (
@@ -357,6 +357,13 @@ class PathFollower:
         """(alpha (3,), beta (3, 3)) with d/dt (eta2, xi2, phi2) = alpha + beta a (updates the warm start)."""
         t = self._terms(_vec(position, "position", MAX_POSITION_ABS_M), _vec(velocity, "velocity", MAX_VELOCITY_ABS_M_S))[2]
         return np.array(t.alpha), np.array((t.beta1, t.beta2, t.beta3))
+
+    def lap_time_bound_s(self) -> float:
+        """The point-mass lower bound of the lap time at this follower's limits (s; an open path:
+        start to end): the largest speed it flies (the speed profile's ``max_speed_m_s``, else
+        ``|speed|``) and the thrust set of :attr:`limits` (:func:`~pf_offboard.control.profile.vehicle_lap_time_bound`)."""
+        v = self.profile.spec.max_speed_m_s if self.profile is not None else abs(self.speed)
+        return vehicle_lap_time_bound(self.path, self.limits, v, self.speed)
 
     # ------------------------------------------------------------------ control
     def reference_speed(self, eta1: float) -> float:

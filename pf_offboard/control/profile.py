@@ -494,3 +494,15 @@ def point_mass_lap_time(path: Path, spec: SpeedProfileSpec, limits: Limits, dire
     feas = _Feasible(geo, limits, spec, response_s)
     closed = bool(path.closed)
     return _travel_time(_passes(_upper_bound(geo, feas, closed), feas, geo.ds, closed), geo.ds, closed)
+
+
+def vehicle_lap_time_bound(path: Path, limits: Limits, max_speed_m_s: float, direction: float = 1.0) -> float:
+    """The fastest a point mass can travel the path at the vehicle's limits (s; one lap on a closed
+    path, start to end on an open one, stopping at the end): speed <= ``max_speed_m_s``, and its
+    acceleration ``a`` anywhere such that ``g e_z + a`` is in the thrust set of ``limits`` (tilt, min
+    / max thrust), so the tangential and normal accelerations are bounded jointly (on a level path
+    ``a_t^2 + a_n^2 <= (g tan(max_tilt))^2``). No share kept for the feedback, no jerk bound, no
+    tangential-acceleration bound of the profile's own: the lower bound of any lap flown within
+    those limits (the forward-backward passes of :func:`point_mass_lap_time`)."""
+    spec = SpeedProfileSpec(max_speed_m_s=min(float(max_speed_m_s), MAX_PROFILE_SPEED_M_S), max_tangential_accel_m_s2=50.0, accel_share=1.0)
+    return point_mass_lap_time(path, spec, limits, direction)

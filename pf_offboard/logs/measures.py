@@ -9,6 +9,10 @@
 - **Converged**: the first time the cross-track error stays ≤ :data:`CONVERGED_TOL_M` for
   :data:`CONVERGED_HOLD_S` without a break; the convergence time is from activation to the start
   of that stretch.
+- **Lap times** (closed paths): the time of each whole lap from activation, lap *k* ending when
+  the net progress along the path (η1 unwrapped, in the direction of travel) first reaches *k*
+  path lengths (interpolated between steps); the first lap includes the approach. Reported beside
+  the point-mass bound at the vehicle's limits (:meth:`pf_offboard.control.PathFollower.lap_time_bound_s`).
 - **Windows**: "from activation + 8 s" (:data:`SETTLE_S`: what the docs quote) and "whole
   flight" (every active step from activation on). Every figure is given with its window's name.
 """
@@ -187,6 +191,44 @@ class Convergence:
             self._run = time_s
         if time_s - self._run >= self.hold_s:
             self.time_s = self._run
+
+
+class LapTimer:
+    """Lap times of a closed path from the η1 of active steps (constant memory but the laps)."""
+
+    def __init__(self, length_m: float) -> None:
+        self.length_m = float(length_m)
+        self.laps_s: list[float] = []
+        self._t_start = math.nan  # activation
+        self._t_lap = math.nan  # start of the lap being flown
+        self._last: tuple[float, float] | None = None
+        self._progress = 0.0  # signed net progress (m)
+        self._sign = 0.0  # direction of travel (the first non-zero reference speed's sign)
+
+    def add(self, time_s: float, eta1_m: float, speed_ref_m_s: float) -> None:
+        if not (math.isfinite(time_s) and math.isfinite(eta1_m)) or self.length_m <= 0.0:
+            return
+        if self._sign == 0.0 and math.isfinite(speed_ref_m_s) and speed_ref_m_s != 0.0:
+            self._sign = 1.0 if speed_ref_m_s > 0.0 else -1.0
+        if self._last is None:
+            self._t_start = self._t_lap = time_s
+            self._last = (time_s, eta1_m)
+            return
+        t0, e0 = self._last
+        L = self.length_m
+        d = (eta1_m - e0 + 0.5 * L) % L - 0.5 * L
+        before = self._progress
+        self._progress += d
+        self._last = (time_s, eta1_m)
+        if self._sign == 0.0:
+            return
+        done = len(self.laps_s) + 1
+        while self._sign * self._progress >= done * L:
+            p0, p1 = self._sign * before, self._sign * self._progress
+            t = t0 + (time_s - t0) * (done * L - p0) / (p1 - p0) if p1 > p0 else time_s
+            self.laps_s.append(t - self._t_lap)
+            self._t_lap = t
+            done += 1
 
 
 @dataclass(frozen=True)

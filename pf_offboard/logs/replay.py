@@ -237,6 +237,17 @@ def _tilt_from_gravity(entries: Sequence[TlogEntry], profile: Any, options: Repl
     return profile.tilts_from_gravity(None if name is None else _param_from_log(entries, name, profile))
 
 
+def _thrust_angle_boost(entries: Sequence[TlogEntry], profile: Any, output_mode: str) -> bool:
+    """Whether fly encoded the thrust for an autopilot boosting it by 1 / cos(tilt): its reported
+    ``thrust_angle_boost_param`` (attitude / rates). A log without it: no (logs from before fly
+    read it; fly itself assumes the autopilot's default 1 only when the parameter goes unanswered)."""
+    name = profile.thrust_angle_boost_param
+    if name is None or output_mode == "acceleration":
+        return False
+    value = _param_from_log(entries, name, profile)
+    return False if value is None else value != 0.0
+
+
 def build_pipeline(
     config: Any,
     entries: Sequence[TlogEntry],
@@ -281,6 +292,7 @@ def build_pipeline(
         time_constant_s=settings.attitude_time_constant_s,
         max_body_rate_rad_s=config.safety.max_body_rate_rad_s if config.safety.enabled else None,  # as fly bounds them
         tilt_from_gravity=_tilt_from_gravity(entries, profile, options),
+        thrust_angle_boost=_thrust_angle_boost(entries, profile, output_mode),
     )  # fmt: skip
     if follower is None:
         follower = controller_from_config(config)
@@ -348,7 +360,7 @@ def replay_flight(
         setpoint_max=setpoint_max,
         record_max=record_max,
         problems=tuple(problems),
-        summary=summarize(records, path_tangent(pipeline.follower.path)),
+        summary=summarize(records, path_tangent(pipeline.follower.path), follower=pipeline.follower),
         profile=profile.name,
         output_mode=output_mode,
     )

@@ -12,7 +12,10 @@ The measures are :mod:`pf_offboard.logs.measures`' (one definition for every com
   the docs quote; None in a shorter flight) and "whole flight" (every active step);
 - saturation time: per limit, the summed duration of active steps whose flag is set (each
   step counts for the interval to the next step);
-- mode changes: (time, from, to) whenever the ``mode`` column changes, and logged events.
+- mode changes: (time, from, to) whenever the ``mode`` column changes, and logged events;
+- on a closed path, the time of each whole lap from activation and, beside it, the point-mass
+  lower bound of a lap at the vehicle's limits (:class:`pf_offboard.logs.measures.LapTimer`;
+  :meth:`pf_offboard.control.PathFollower.lap_time_bound_s`).
 
 Without the path (``tangent=None``) the position-derived speed is not available (n/a).
 """
@@ -36,6 +39,7 @@ from pf_offboard.logs.measures import (
     WINDOW_SETTLED,
     WINDOW_WHOLE,
     Convergence,
+    LapTimer,
     Tangent,
     WindowFigures,
     WindowSums,
@@ -58,6 +62,10 @@ class FlightSummary:
     saturation_s: dict[str, float]
     mode_changes: tuple[tuple[float, str, str], ...]
     events: tuple[tuple[float, str], ...]
+    # closed path: each whole lap's time from activation (s; the first includes the approach), and
+    # the point-mass lower bound of one lap at the vehicle's limits (s; None when not given)
+    lap_times_s: tuple[float, ...] = ()
+    lap_time_bound_s: float | None = None
 
     # shorthands (window in the name)
     @property
@@ -90,6 +98,8 @@ class FlightSummary:
             "saturation_s": dict(self.saturation_s),
             "mode_changes": [{"time_s": t, "from": a, "to": b} for t, a, b in self.mode_changes],
             "events": [{"time_s": t, "event": e} for t, e in self.events],
+            "lap_times_s": list(self.lap_times_s),
+            "lap_time_bound_s": self.lap_time_bound_s,
         }
 
     def lines(self) -> list[str]:
@@ -106,6 +116,10 @@ class FlightSummary:
             (self.whole.line() if self.whole is not None else f"{WINDOW_WHOLE}: n/a (no active step)"),
             "saturation          " + ", ".join(f"{k.removeprefix('sat_')} {v:.2f} s" for k, v in self.saturation_s.items()),
         ]
+        if self.lap_times_s or self.lap_time_bound_s is not None:
+            laps = ", ".join(f"{x:.2f}" for x in self.lap_times_s) or "none completed"
+            bound = "" if self.lap_time_bound_s is None else f"; point-mass bound at the vehicle's limits {self.lap_time_bound_s:.2f} s"
+            out.append(f"lap times           {laps} s (from activation; the first includes the approach){bound}")
         for t, a, b in self.mode_changes:
             out.append(f"mode change         t={t:.3f} s: {a or '-'} -> {b}")
         for t, e in self.events:
@@ -130,6 +144,8 @@ class SummaryAccumulator:
     def __init__(self, tangent: Tangent | None = None, settle_s: float = SETTLE_S) -> None:
         self.tangent = tangent
         self.settle_s = settle_s
+        self._laps: LapTimer | None = None
+        self.lap_time_bound_s: float | None = None
         self.steps = 0
         self.active_steps = 0
         self._t_first = self._t_last = math.nan
@@ -146,6 +162,11 @@ class SummaryAccumulator:
         # recent steps [time, position, active record or None, counted]: the ones waiting for their
         # +0.1 s neighbour and those still needed as a -0.1 s neighbour
         self._recent: deque[list[Any]] = deque()
+    def time_laps(self, length_m: float, bound_s: float | None = None) -> None:
+        """A closed path of ``length_m``: time its laps (and report ``bound_s`` beside them)."""
+        self._laps = LapTimer(length_m)
+        self.lap_time_bound_s = bound_s if bound_s is not None and math.isfinite(bound_s) else None
+
     def add(self, r: StepRecord) -> None:
         t = r.time_s
         prev = self._prev
@@ -172,6 +193,8 @@ class SummaryAccumulator:
             if self._t_act is None:
                 self._t_act = t
             self._conv.add(t, r.cross_track_m)
+            if self._laps is not None:
+                self._laps.add(t, r.eta1_m, r.speed_ref_m_s)
         pos = np.asarray(r.position_enu_m, dtype=float)
         if not (math.isfinite(t) and (not self._recent or t > self._recent[-1][0])):
             # not newer than the last step: no derivative through it; counted without one
@@ -261,16 +284,31 @@ class SummaryAccumulator:
             saturation_s=saturation,
             mode_changes=tuple(self._modes),
             events=events,
+            lap_times_s=tuple(self._laps.laps_s) if self._laps is not None else (),
+            lap_time_bound_s=self.lap_time_bound_s,
         )
 
 
-def summarize(records: Iterable[StepRecord], tangent: Tangent | None = None, settle_s: float = SETTLE_S) -> FlightSummary:
+def summarize(records: Iterable[StepRecord], tangent: Tangent | None = None, settle_s: float = SETTLE_S,
+              follower: Any = None) -> FlightSummary:  # fmt: skip
     """Summarise a flight's step log (see the module docstring for the definitions); ``tangent``:
-    the path's (:func:`pf_offboard.logs.measures.path_tangent`) for the position-derived speed."""
+    the path's (:func:`pf_offboard.logs.measures.path_tangent`) for the position-derived speed;
+    ``follower``: its path's laps are timed (closed path) beside its lap-time bound."""
     acc = SummaryAccumulator(tangent, settle_s)
+    time_laps_of(acc, follower)
     for r in records:
         acc.add(r)
     return acc.result()
+
+
+def time_laps_of(acc: SummaryAccumulator, follower: Any) -> None:
+    """Time the laps of ``follower``'s path if it is closed, beside its point-mass bound (a
+    follower without :meth:`~pf_offboard.control.PathFollower.lap_time_bound_s`: no bound)."""
+    path = getattr(follower, "path", None)
+    if path is None or not bool(getattr(path, "closed", False)):
+        return
+    bound = getattr(follower, "lap_time_bound_s", None)
+    acc.time_laps(float(path.length_m), float(bound()) if callable(bound) else None)
 
 
 SUMMARY_JSON = "summary.json"

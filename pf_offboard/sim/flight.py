@@ -38,7 +38,7 @@ from pf_offboard.errors import InputError
 from pf_offboard.logs.flightlog import FlightLog, FlightLogPaths
 from pf_offboard.logs.steplog import StepRecord
 from pf_offboard.logs.measures import path_tangent
-from pf_offboard.logs.summary import FlightSummary, SummaryAccumulator
+from pf_offboard.logs.summary import FlightSummary, SummaryAccumulator, time_laps_of
 from pf_offboard.logs.tlog import OWN_COMPONENT_ID
 
 AUTOPILOT_SYSTEM_ID = 1
@@ -361,6 +361,7 @@ class SimFlight:
         self._mode_requested = False
         self._inbox: deque[Any] = deque()
         self.summary = SummaryAccumulator(path_tangent(self.path))  # running sums only: the steps go to the CSV
+        time_laps_of(self.summary, self.pipeline.follower)  # closed path: lap times beside the point-mass bound
         # called with the simulated time every 250 steps (benchmarks sample memory with it)
         self.progress: Callable[[float], None] | None = None
         self.reason = ""

@@ -197,3 +197,22 @@ def test_tilt_from_the_whole_demand_is_sent_as_computed_and_the_flag_survives_co
     a = frames.ned_to_enu([hold.afx, hold.afy, hold.afz])
     assert a[2] == pytest.approx(1.0)  # -1/s x velocity, below the 3 m/s^2 clip
     assert a[0] == pytest.approx(-1.0 * G_M_S2 / (G_M_S2 + 1.0))
+
+
+def test_angle_boost_is_divided_out_in_attitude_and_rates() -> None:
+    """ArduPilot (ATC_ANGLE_BOOST = 1) divides the thrust by cos(target tilt): the encoder sends the
+    core's thrust times that cosine (attitude: the tilt sent; rates: the measured tilt, which the
+    autopilot's integrated target follows); level setpoints and PX4 unchanged; copies keep it."""
+    tilt = 0.4
+    q = quat_about((1, 0, 0), tilt)
+    cmd = command(attitude=q, thrust=12.0)
+    plain = Encoder("attitude", ARDUPILOT, 1, 1, hover_thrust=0.4)
+    boosted = plain.with_thrust_angle_boost(True)
+    assert plain.encode(cmd, estimate(), 0).message.thrust == pytest.approx(12.0 / 9.81 * 0.4)
+    assert boosted.encode(cmd, estimate(), 0).message.thrust == pytest.approx(12.0 / 9.81 * 0.4 * math.cos(tilt))
+    assert boosted.with_hover_thrust(0.4).thrust_angle_boost and boosted.with_tilt_from_gravity(True).thrust_angle_boost
+    level = command(attitude=(1.0, 0.0, 0.0, 0.0), thrust=12.0)
+    assert boosted.encode(level, estimate(), 0).message.thrust == pytest.approx(12.0 / 9.81 * 0.4)
+    rates = Encoder("rates", ARDUPILOT, 1, 1, hover_thrust=0.4, thrust_angle_boost=True)
+    sent = rates.encode(cmd, estimate(q=q), 0).message.thrust  # at the target: projection 1
+    assert sent == pytest.approx(12.0 / 9.81 * 0.4 * math.cos(tilt))

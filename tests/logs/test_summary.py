@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -88,3 +89,43 @@ def test_no_active_steps_windows_are_na() -> None:
     s = summarize([record(0.0, 0.3, 0.0, active=False), record(0.1, 0.3, 0.0, active=False)])
     assert s.whole is None and s.settled is None and s.whole_cross_track_rms_m is None
     assert any(line.startswith("whole flight") and "n/a" in line for line in s.lines())
+
+
+class _Follower:
+    """A closed path of 10 m with a lap-time bound (what the summary reads of a PathFollower)."""
+
+    class path:  # noqa: N801
+        closed = True
+        length_m = 10.0
+
+    @staticmethod
+    def lap_time_bound_s() -> float:
+        return 4.0
+
+
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_lap_times_from_the_net_progress(direction: float) -> None:
+    """eta1 wraps at 10 m; travelling at 2 m/s (with jitter backwards) from eta1 = 3 m: laps of 5 s
+    each, crossing times interpolated; the bound is printed beside them and in the JSON."""
+    rng = np.random.default_rng(1)
+    recs = []
+    for k in range(1301):  # 13 s at 100 Hz: 26 m, two whole laps
+        t = 0.01 * k
+        e = (3.0 + direction * 2.0 * t + rng.uniform(-0.02, 0.02)) % 10.0
+        recs.append(dataclasses.replace(record(t, 0.01, 2.0 * direction, speed_ref_m_s=2.0 * direction), eta1_m=e))
+    s = summarize(recs, follower=_Follower())
+    assert len(s.lap_times_s) == 2
+    assert s.lap_times_s == pytest.approx((5.0, 5.0), abs=0.02)
+    assert s.lap_time_bound_s == 4.0
+    line = [x for x in s.lines() if x.startswith("lap times")][0]
+    assert "5.00, 5.00 s" in line or "4.99" in line or "5.01" in line
+    assert "bound at the vehicle's limits 4.00 s" in line
+    d = s.to_dict()
+    assert d["lap_time_bound_s"] == 4.0 and len(d["lap_times_s"]) == 2
+
+
+def test_no_lap_times_without_a_closed_path() -> None:
+    recs = [record(0.01 * k, 0.01, -1.5) for k in range(100)]
+    s = summarize(recs)
+    assert s.lap_times_s == () and s.lap_time_bound_s is None
+    assert not any(x.startswith("lap times") for x in s.lines())

@@ -64,7 +64,8 @@ class Dialect:
         to fly with.
 
         attitude / rates: the hover thrust (unless the config gives one); a value no vehicle hovers
-        at is a link error. acceleration: whether the autopilot tilts from g alone
+        at is a link error; whether the autopilot boosts the thrust by 1 / cos(tilt)
+        (:attr:`Profile.thrust_angle_boost_param`, ArduPilot's ATC_ANGLE_BOOST; unanswered: its default, 1). acceleration: whether the autopilot tilts from g alone
         (:attr:`Profile.accel_tilt_param`, PX4's MPC_ACC_DECOUPLE); without an answer the profile's
         default (PX4's own default) is kept and a warning says so.
         """
@@ -74,7 +75,14 @@ class Dialect:
                 hover = await params.read(profile.hover_thrust_param)
                 if not 0.05 <= hover <= 0.95:
                     raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
-                return encoder.with_hover_thrust(float(hover))
+                encoder = encoder.with_hover_thrust(float(hover))
+            if profile.thrust_angle_boost_param is not None:
+                try:
+                    boost = await params.read(profile.thrust_angle_boost_param)
+                except LinkError as exc:
+                    warn(f"pf-offboard: warning: {exc}; assuming {profile.thrust_angle_boost_param} = 1, the autopilot's default")
+                    boost = 1.0
+                encoder = encoder.with_thrust_angle_boost(boost != 0.0)
             return encoder
         if profile.accel_tilt_param is None:
             return encoder
