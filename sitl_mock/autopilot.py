@@ -150,6 +150,7 @@ class Autopilot:
         self.px4_target: TrajectoryTarget | AttitudeTarget | None = None
         self.guided = ArduGuided()
         self.position_target_echo: tuple[int, list[float]] | None = None
+        self.echo_unsent: tuple[int, list[float]] | None = None  # PX4: published, not yet streamed
         self._dyn_setpoint: Setpoint = MotorsOff()
         if spawn.kind == "hover":
             # Already flying, as a pilot would hand it over: PX4 AUTO.LOITER, ArduCopter LOITER.
@@ -385,6 +386,9 @@ class Autopilot:
     def _echo_position_target(self, msg: mavlink.MAVLink_message) -> None:
         values = [msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, msg.afx, msg.afy, msg.afz, msg.yaw, msg.yaw_rate]
         self.position_target_echo = (int(msg.type_mask), [float(v) for v in values])
+        # PX4 streams the latest setpoint its position controller published since the last send (a
+        # uORB topic): one run on a setpoint is echoed even if an attitude target follows at once
+        self.echo_unsent = self.position_target_echo if self.profile.name == "px4" else None
 
     def _on_attitude_target(self, msg: mavlink.MAVLink_message) -> list[Out]:
         if self.profile.name == "px4":
@@ -395,6 +399,7 @@ class Autopilot:
             self.last_setpoint_s = self.time_s
             if self.mode.behaviour is Behaviour.OFFBOARD:
                 self.px4_target = target
+                self.position_target_echo = None  # the position controller is off: nothing echoed
             return []
         if self.mode.behaviour is not Behaviour.OFFBOARD:
             return []
@@ -413,6 +418,7 @@ class Autopilot:
             self.guided.hold(pos, vel, yaw)
             return []
         self.guided.set_angle(result, self.time_s)
+        self.position_target_echo = None  # the angle sub-mode has no local target: nothing echoed
         self.motors_locked = False
         return []
 

@@ -259,6 +259,10 @@ class MockConfig:
     # MAVLink 2 signing key file (32 raw bytes, 64 hex digits or a passphrase; sitl_mock.signing):
     # sign everything sent, drop unsigned / wrongly signed frames. None: no signing.
     signing_key_file: str | None = None
+    # Relay every client's setpoints (SET_POSITION_TARGET_* / SET_ATTITUDE_TARGET) to the other
+    # clients, as a MAVLink router or an autopilot forwarding between its links does: a second
+    # controller's setpoints are then seen by the first. False: like a bare SITL port.
+    relay_setpoints: bool = False
 
     def validate(self) -> None:
         if self.profile not in PROFILES:
