@@ -68,6 +68,11 @@ class ControllerWatch:
         if carries_position_or_velocity(msg):
             self._own_pv_s = now_s
 
+    def autopilot_target(self, now_s: float) -> None:
+        """The autopilot's own position target until now (ArduCopter's take-off sub-mode until our
+        first attitude target lands: its echo can still arrive as following begins)."""
+        self._own_pv_s = max(self._own_pv_s, now_s)
+
     def relayed_setpoint(self, msg: Any, now_s: float) -> None:
         self.relayed += 1
         self._add(now_s, f"{msg.get_type()} from system {msg.get_srcSystem()} component {msg.get_srcComponent()}")

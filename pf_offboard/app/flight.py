@@ -583,6 +583,7 @@ class Flight:
             self.activation_time_s = est.time_s
             self._activation_clock_s = flight_clock_s(est)
         self._event = self._event or "activated"
+        self.controllers.autopilot_target(self.clock())  # echoes of the take-off / hold target may still arrive
         self.phase = Phase.FOLLOWING
         self.offboard_seen = True
         self.waiter.notify()

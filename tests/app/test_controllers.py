@@ -70,6 +70,17 @@ def test_our_own_position_setpoints_explain_the_echo_for_a_second() -> None:
     assert w.echoes == 0
 
 
+def test_the_autopilots_own_target_at_activation_is_not_evidence() -> None:
+    """ArduCopter SITL: echoes of its take-off sub-mode (position only) ended 15-40 ms before
+    following began; one still in flight must not count."""
+    w = ControllerWatch()
+    w.autopilot_target(10.0)
+    for t in (10.02, 10.06, 10.1):
+        w.echoed_target(echo(0xDF8, x=1.0), t)
+    w.heartbeat(True, 10.2)
+    assert w.verdict(10.2) == "" and w.echoes == 0
+
+
 def test_relayed_setpoints_name_their_sender() -> None:
     w = ControllerWatch()
     other = _decoded(sent_position())

@@ -64,10 +64,11 @@ class OtherController(Attacker):
 )
 def test_a_second_controller_during_the_flight_ends_it_in_the_hold(tmp_path, profile: str, output: str, relay: bool) -> None:
     app_port = free_udp_port()
-    # Every setpoint switches the autopilot between the two controllers: the fight jerks the mock's
-    # fast vehicle past the tilt look-ahead (60 deg) in some loaded runs before the evidence is in
-    # (exit 5, safe too); with the limit at 80 deg the detection is what ends the flight
-    config = write_config(tmp_path, safety={"max_tilt_deg": 80.0})
+    # Every setpoint switches the autopilot between the two controllers: on a loaded machine the
+    # fight jerks the mock's fast vehicle past the tilt look-ahead (60 deg) or the paper path's tight
+    # fence in some runs before the evidence is in (exit 5, safe too); with a wider envelope the
+    # detection is what ends the flight
+    config = write_config(tmp_path, safety={"max_tilt_deg": 80.0, "fence_margin_m": 4.0, "max_path_distance_m": 5.0})
     fence = envelope_fence(load_config(config))
     flags = ["--airborne", "--duration", "30", "--output", output]
     if profile == "ardupilot":
@@ -96,7 +97,7 @@ def test_a_second_controller_during_the_flight_ends_it_in_the_hold(tmp_path, pro
             m.autopilot.mode.name, bool(m.autopilot.armed), ned_to_enu(np.array(m.truth.position_ned_m)),
             [e.text for e in m.autopilot.log]))  # fmt: skip
         relayed = mock.call(lambda m: m.relayed)
-    hold = "AUTO.LOITER" if profile == "px4" else "LOITER"
+    hold = "AUTO.LOITER" if profile == "px4" else "BRAKE"
     modes = [e for e in events if e.startswith("mode ")]
     print(f"\n{profile} {output} relay={relay}: exit {outcome.exit_code}, {outcome.reason}; other sent {other.sent}, "
           f"mock relayed {relayed}; vehicle {mode} at {position_enu.round(2)}; modes {modes}")  # fmt: skip
