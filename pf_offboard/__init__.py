@@ -51,6 +51,7 @@ _EXPORTS: dict[str, str] = {
     "LinkLost": "pf_offboard.errors",
     "CommandRefused": "pf_offboard.errors",
     "AutopilotFailsafe": "pf_offboard.errors",
+    "AnotherController": "pf_offboard.errors",
     "FlightInterrupted": "pf_offboard.errors",
     "InputError": "pf_offboard.errors",
     "LinkError": "pf_offboard.errors",
@@ -65,6 +66,7 @@ if TYPE_CHECKING:
         Command, Compensation, Gains, Limits, PathFollower, Saturation, TransverseState, VehicleModel, YawSpec,
     )  # fmt: skip
     from pf_offboard.errors import (
+        AnotherController,
         AutopilotFailsafe,
         CommandRefused,
         CrashDetected,

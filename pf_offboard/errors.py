@@ -74,6 +74,13 @@ class AutopilotFailsafe(FlightError):
     exit_code = 7
 
 
+class AnotherController(FlightError):
+    """Another controller's setpoints reached the vehicle while we flew it (relayed on the link, or
+    in the autopilot's echoed target): following ended, the hold requested until confirmed (exit 8)."""
+
+    exit_code = 8
+
+
 class FlightInterrupted(FlightError):
     """Stopped (Ctrl-C, a stop request) before following began (exit 130)."""
 

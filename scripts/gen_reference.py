@@ -71,6 +71,7 @@ EXIT_CODES = (
     (5, "envelope breach: following ended, hold (or land) requested"),
     (6, "crash: disarmed, landed or falling under our commands"),
     (7, "the autopilot's own failsafe took over: the app stopped commanding"),
+    (8, "another controller's setpoints reached the vehicle while the app flew it: hold (or land) requested"),
     (130, "interrupted before following began"),
 )
 

@@ -150,6 +150,8 @@ class Autopilot:
         self.px4_target: TrajectoryTarget | AttitudeTarget | None = None
         self.guided = ArduGuided()
         self.position_target_echo: tuple[int, list[float]] | None = None
+        self.echo_unsent: tuple[int, list[float]] | None = None  # PX4: published, not yet streamed
+        self.rc_throttle: float | None = config.rc_throttle  # the pilot's stick (tests move it)
         self._dyn_setpoint: Setpoint = MotorsOff()
         if spawn.kind == "hover":
             # Already flying, as a pilot would hand it over: PX4 AUTO.LOITER, ArduCopter LOITER.
@@ -385,6 +387,9 @@ class Autopilot:
     def _echo_position_target(self, msg: mavlink.MAVLink_message) -> None:
         values = [msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, msg.afx, msg.afy, msg.afz, msg.yaw, msg.yaw_rate]
         self.position_target_echo = (int(msg.type_mask), [float(v) for v in values])
+        # PX4 streams the latest setpoint its position controller published since the last send (a
+        # uORB topic): one run on a setpoint is echoed even if an attitude target follows at once
+        self.echo_unsent = self.position_target_echo if self.profile.name == "px4" else None
 
     def _on_attitude_target(self, msg: mavlink.MAVLink_message) -> list[Out]:
         if self.profile.name == "px4":
@@ -395,6 +400,7 @@ class Autopilot:
             self.last_setpoint_s = self.time_s
             if self.mode.behaviour is Behaviour.OFFBOARD:
                 self.px4_target = target
+                self.position_target_echo = None  # the position controller is off: nothing echoed
             return []
         if self.mode.behaviour is not Behaviour.OFFBOARD:
             return []
@@ -413,6 +419,7 @@ class Autopilot:
             self.guided.hold(pos, vel, yaw)
             return []
         self.guided.set_angle(result, self.time_s)
+        self.position_target_echo = None  # the angle sub-mode has no local target: nothing echoed
         self.motors_locked = False
         return []
 
@@ -835,7 +842,21 @@ class Autopilot:
         if behaviour is Behaviour.LEVEL:
             thrust = thrust_for_climb(0.0, float(vel[2]), self.truth.q_ned_frd, self.hover_thrust, PX4_GAINS.vel_z)
             return AttitudeSetpoint(level_attitude(yaw), thrust)
+        climb = self._pilot_climb_m_s()
+        if climb:
+            self.hold_position[2] = min(self.hold_position[2] - climb * dt_s, 1.0)
+            return self._position_sp(self.hold_position, self.hold_yaw, (0.0, 0.0, -climb))
         return self._position_sp(self.hold_position, self.hold_yaw)
+
+    def _pilot_climb_m_s(self) -> float:
+        """ArduCopter LOITER / POSHOLD: the climb rate the pilot's throttle stick asks for (m/s up)."""
+        stick = self.rc_throttle
+        if stick is None or self.profile.name != "ardupilot" or self.mode.name not in ("LOITER", "POSHOLD"):
+            return 0.0
+        off = (float(stick) - 0.5) / 0.5  # -1 .. 1
+        if abs(off) <= 0.1:  # THR_DZ 100 of 1000
+            return 0.0
+        return (abs(off) - 0.1) / 0.9 * math.copysign(self.params["PILOT_SPEED_UP"] / 100.0, off)
 
     def _land(self, dt_s: float, landed: bool) -> Setpoint:
         if landed and self.took_off:

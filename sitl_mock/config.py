@@ -259,6 +259,15 @@ class MockConfig:
     # MAVLink 2 signing key file (32 raw bytes, 64 hex digits or a passphrase; sitl_mock.signing):
     # sign everything sent, drop unsigned / wrongly signed frames. None: no signing.
     signing_key_file: str | None = None
+    # Relay every client's setpoints (SET_POSITION_TARGET_* / SET_ATTITUDE_TARGET) to the other
+    # clients, as a MAVLink router or an autopilot forwarding between its links does: a second
+    # controller's setpoints are then seen by the first. False: like a bare SITL port.
+    relay_setpoints: bool = False
+    # The pilot's RC throttle stick, 0 (down) .. 1 (up); None: centred (or no RC). ArduCopter's
+    # LOITER / POSHOLD climb or descend with it outside the 10 % dead zone around the middle: the
+    # SITL's RC input with nobody at the sticks is 1000 us, stick fully down (AP_RCProtocol_UDP),
+    # so a vehicle handed to LOITER there descends at PILOT_SPEED_UP (2.5 m/s) to the ground.
+    rc_throttle: float | None = None
 
     def validate(self) -> None:
         if self.profile not in PROFILES:

@@ -133,6 +133,7 @@ ARDUPILOT_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("GUID_OPTIONS", 0, ParamType.INT32),
     ParamSpec("GUID_TIMEOUT", 3.0),  # s
     ParamSpec("LAND_SPEED", 50, ParamType.INT32),  # cm/s
+    ParamSpec("PILOT_SPEED_UP", 250, ParamType.INT32),  # cm/s, the stick's full climb / descent in LOITER (PILOT_SPEED_DN 0)
     ParamSpec("MOT_THST_HOVER", 0.35),  # 0..1, replaced by the vehicle's true hover thrust
     ParamSpec("PSC_JERK_XY", 5.0),  # m/s^3
     ParamSpec("PSC_JERK_Z", 5.0),  # m/s^3

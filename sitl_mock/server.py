@@ -32,6 +32,7 @@ from sitl_mock.signing import verify_signature_first
 UDP_LINK = 0
 _KEEPALIVE_IDS = (mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_SYS_STATUS)
 _ATTITUDE_ID = mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION
+_RELAYED_IDS = SETPOINT_IDS | {mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT}
 
 
 @dataclass(frozen=True)
@@ -169,6 +170,7 @@ class MockAutopilot:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._done: asyncio.Event | None = None
         self.received = 0
+        self.relayed = 0  # setpoints relayed from one client to the others (config.relay_setpoints)
         self.steps = 0
         self._signing_key = config.signing_key()
         # one signing state for the UDP link (every UDP address shares it, like a real autopilot's
@@ -393,6 +395,14 @@ class MockAutopilot:
                             self._delay_seq += 1
                             heapq.heappush(self._delayed, (release, self._delay_seq, peer, chunk))
 
+    def _relay(self, source: _Peer, msg: mavlink.MAVLink_message) -> None:
+        """Forward ``msg`` unchanged (its sender's ids) to every other client, as a router does."""
+        others = [peer for peer in self._peers_of(None) if peer is not source]
+        for peer in others:
+            peer.queue(msg.get_msgbuf())
+        if others:
+            self.relayed += 1
+
     def _flush_delayed(self) -> None:
         now = self.autopilot.time_s
         while self._delayed and self._delayed[0][0] <= now:
@@ -500,6 +510,8 @@ class MockAutopilot:
             replies = ap.handle(msg, peer.link)
             if replies:
                 self._emit(replies)
+            if self.config.relay_setpoints and msg.get_msgId() in _RELAYED_IDS:
+                self._relay(peer, msg)
             if lockstep and msg.get_msgId() in SETPOINT_IDS and not self._finished():
                 self._step(self.config.lockstep_dt_s)
                 if self._finished():

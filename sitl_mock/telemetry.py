@@ -255,11 +255,19 @@ def attitude_target(ap: Autopilot) -> mavlink.MAVLink_message:
     )
 
 
-def position_target_local_ned(ap: Autopilot) -> mavlink.MAVLink_message:
-    t = ap.position_target_echo
+def position_target_local_ned(ap: Autopilot) -> mavlink.MAVLink_message | None:
+    """The autopilot's echo of the setpoint it flies (None: not sent). PX4 streams its position
+    controller's setpoint, so nothing while an attitude / rate target is flown; ArduCopter sends it
+    only in GUIDED and not in its angle sub-mode (GCS_MAVLink_Copter.cpp)."""
+    t = ap.position_target_echo if ap.echo_unsent is None else ap.echo_unsent
+    ap.echo_unsent = None
+    offboard = ap.mode.behaviour.name == "OFFBOARD"
+    if ap.profile.name == "ardupilot" and (t is None or not offboard):
+        return None
     if t is None:
-        mask = 0xFFF
-        values = [0.0] * 11
+        if offboard:
+            return None  # PX4 flying an attitude / rate target
+        mask, values = 0xFFF, [0.0] * 11  # PX4 outside OFFBOARD: its own modes' setpoint (not modelled)
     else:
         mask, values = t
     return mavlink.MAVLink_position_target_local_ned_message(

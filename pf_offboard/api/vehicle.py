@@ -31,6 +31,7 @@ from typing import Any, TextIO
 
 from pf_offboard.api.results import FollowResult, Progress
 from pf_offboard.errors import (
+    AnotherController,
     AutopilotFailsafe,
     CommandRefused,
     CrashDetected,
@@ -52,6 +53,7 @@ _ERRORS: dict[int, type[FlightError]] = {
     5: EnvelopeBreach,
     6: CrashDetected,
     7: AutopilotFailsafe,
+    8: AnotherController,
     130: FlightInterrupted,
 }
 

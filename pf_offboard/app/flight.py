@@ -31,10 +31,12 @@ from pymavlink.dialects.v20 import common as mavlink2
 from pf_offboard.app.commands import Commander, CommandRefusedError, CommandTiming, EvidenceClock, ModeChange, ModeWatch
 from pf_offboard.app.dialects import Dialect, dialect_for
 from pf_offboard.app.encoders import position_setpoint, yaw_of
+from pf_offboard.app.controllers import ECHO_MESSAGE, SETPOINT_MESSAGES, ControllerWatch
 from pf_offboard.app.estimator import StateEstimate, flight_clock_s
 from pf_offboard.app.params import Parameters
 from pf_offboard.app.phases import (
     EXIT_BREACH,
+    EXIT_CONTROLLER,
     EXIT_CRASH,
     EXIT_FAILSAFE,
     EXIT_INTERRUPTED,
@@ -126,6 +128,7 @@ class Flight:
         )  # fmt: skip
         self.params = Parameters(link, self.waiter, profile.params_bytewise, options.command_timeout_s)
         self.supervisor = SafetySupervisor(monitor, pipeline.encoder.output_mode)
+        self.controllers = ControllerWatch()  # one controller at a time (another's setpoints while we fly)
         speed_ref = pipeline.speed_ref_m_s
         self.laps = LapCounter(path_length_m, path_closed, speed_ref if math.isfinite(speed_ref) and speed_ref != 0.0 else None)
         self.throw = ThrowTrigger(options.height_m) if options.launch == "throw" else None
@@ -397,6 +400,15 @@ class Flight:
         if kind == "PARAM_VALUE":
             self.params.on_param_value(msg)
             return
+        if kind in SETPOINT_MESSAGES:  # (the link hands on only another controller's, relayed to us)
+            self.controllers.relayed_setpoint(msg, self.clock())
+            self._check_controllers()
+            return
+        if kind == ECHO_MESSAGE:
+            if self.phase is Phase.FOLLOWING:
+                self.controllers.echoed_target(msg, self.clock())
+                self._check_controllers()
+            return
         if kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
             self.commander.last_statustext = text.rstrip("\x00")
@@ -435,6 +447,8 @@ class Flight:
             self.offboard_seen = True
         change = modes.classify(msg)
         if change is ModeChange.OURS:
+            self.controllers.heartbeat(offboard, self.clock())
+            self._check_controllers()
             return
         old = self.profile.mode_name(modes.previous_mode) if modes.previous_mode is not None else "?"
         new = self.profile.mode_name(msg.custom_mode)
@@ -569,9 +583,21 @@ class Flight:
             self.activation_time_s = est.time_s
             self._activation_clock_s = flight_clock_s(est)
         self._event = self._event or "activated"
+        self.controllers.autopilot_target(self.clock())  # echoes of the take-off / hold target may still arrive
         self.phase = Phase.FOLLOWING
         self.offboard_seen = True
         self.waiter.notify()
+
+    def _check_controllers(self) -> None:
+        """Another controller's setpoints while we are in control (taking off, engaging, following):
+        end following, the safe setpoint and the hold until confirmed (exit 8). Two controllers
+        alternating setpoints fly neither's path; the hold stops both."""
+        if self.phase not in (Phase.TAKEOFF, Phase.ENGAGING, Phase.FOLLOWING):
+            return
+        why = self.controllers.verdict(self.clock())
+        if why:
+            self._event = "another controller"
+            self._enter_safing(EXIT_CONTROLLER, why)
 
     # ------------------------------------------------------------------ ending: breach, crash, safe mode
     def _breach(self, verdict: Verdict, est: StateEstimate | None) -> None:
@@ -642,6 +668,7 @@ class Flight:
     # ------------------------------------------------------------------ sending
     def _send(self, msg: Any) -> None:
         self.link.send(msg)
+        self.controllers.sent(msg, self.clock())
         self._last_setpoint = msg
         self._last_send_wall = self.clock()
         self.sent_setpoints += 1

@@ -20,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from pf_offboard.app.controllers import SETPOINT_MESSAGES
 from pf_offboard.app.signing import verify_signature_first
 from pf_offboard.errors import InputError, LinkError
 
@@ -239,6 +240,7 @@ class LinkCounters:
     bad_data: int = 0  # CRC / framing errors
     stale_state: int = 0  # state samples that waited in the socket longer than the state timeout
     foreign_ack: int = 0  # COMMAND_ACKs addressed to another system / component (another GCS's command)
+    foreign_setpoint: int = 0  # another controller's setpoints for our autopilot, relayed on our link
     reader_yields: int = 0  # wake-ups that stopped at MAX_MESSAGES_PER_WAKEUP with more waiting
 
     @property
@@ -251,6 +253,7 @@ class LinkCounters:
             f"rejected {self.foreign_peer} from another address, {self.not_target} from another component, "
             f"{self.not_autopilot_heartbeat} non-autopilot HEARTBEATs, {self.bad_signature} badly signed; "
             f"{self.bad_data} corrupt, {self.stale_state} stale state dropped, {self.foreign_ack} ACKs for others ignored, "
+            f"{self.foreign_setpoint} setpoints of another controller seen, "
             f"{self.reader_yields} reader yields"
         )
 
@@ -421,6 +424,15 @@ class Link:
         target = self.target
         if target is not None:
             if msg.get_srcSystem() != target.system or msg.get_srcComponent() != target.component:
+                if kind in SETPOINT_MESSAGES and int(getattr(msg, "target_system", 0) or 0) in (0, target.system):
+                    # another controller's setpoint for our autopilot, relayed to us (a router, an
+                    # autopilot forwarding between links): evidence, never state; the handler judges it
+                    self._n["foreign_setpoint"] += 1
+                    if self.on_received is not None:
+                        self.on_received(msg)
+                    if self._handler is not None:
+                        self._handler(msg)
+                    return
                 self._n["not_target"] += 1  # other systems / components are not ours to follow
                 return
             if kind == "HEARTBEAT" and not (

@@ -22,6 +22,7 @@ EXIT_TAKEOVER = 4  # the operator took the vehicle back; we yielded
 EXIT_BREACH = 5  # the flight envelope was breached: following ended, safe mode requested
 EXIT_CRASH = 6  # the vehicle disarmed, landed or fell while we commanded it
 EXIT_FAILSAFE = 7  # the autopilot's own failsafe took over (LAND / RTL); the app stopped commanding
+EXIT_CONTROLLER = 8  # another controller's setpoints reached the vehicle while we flew: hold requested
 EXIT_INTERRUPTED = 130  # Ctrl-C before following began
 
 

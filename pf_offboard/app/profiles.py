@@ -178,8 +178,11 @@ ARDUPILOT = Profile(
     autopilot=Autopilot.ARDUPILOT,
     offboard=ModeRequest("GUIDED", 4, 0),
     offboard_custom_mode=4,
-    hold=ModeRequest("LOITER", 5, 0),
-    hold_custom_mode=5,
+    # BRAKE, not LOITER: LOITER climbs / descends with the pilot's throttle stick, which is down after
+    # a GUIDED take-off (and in SITL with nobody at the sticks: it hit the ground at 2.4 m/s 1.5 s
+    # after a hand-back); BRAKE stops and holds, ignoring the sticks, until the pilot switches mode
+    hold=ModeRequest("BRAKE", 17, 0),
+    hold_custom_mode=17,
     land=ModeRequest("LAND", 9, 0),
     land_custom_mode=9,
     hover_thrust_param="MOT_THST_HOVER",

@@ -14,7 +14,8 @@ from pf_offboard.errors import InputError, LinkError
 def stream_requests(state_source: str, setpoint_rate_hz: float) -> list[tuple[int, float, str]]:
     """The telemetry a flight needs, as (message id, rate Hz, name): the state at the setpoint rate
     (a fresh sample drives each setpoint), HEARTBEAT at 10 Hz so a takeover is seen within 0.1 s
-    where honoured."""
+    where honoured, and the autopilot's echoed target at 25 Hz (another controller's setpoints
+    show in it: :mod:`pf_offboard.app.controllers`; PX4 streams it anyway, ArduPilot on request)."""
     from pymavlink.dialects.v20 import common as mavlink2
 
     if state_source == "local_position":
@@ -25,6 +26,7 @@ def stream_requests(state_source: str, setpoint_rate_hz: float) -> list[tuple[in
         state,
         (mavlink2.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, setpoint_rate_hz, "ATTITUDE_QUATERNION"),
         (mavlink2.MAVLINK_MSG_ID_HEARTBEAT, 10.0, "HEARTBEAT"),
+        (mavlink2.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED, 25.0, "POSITION_TARGET_LOCAL_NED"),
     ]
 
 

@@ -265,6 +265,6 @@ def test_ardupilot_take_off_holds_in_guided_then_follows(tmp_path) -> None:
 
     with run_in_thread(cfg) as mock:
         took, mode, result = asyncio.run(fly(_url(mock)))
-        assert _mode(mock) == "LOITER"
+        assert _mode(mock) == "BRAKE"
     assert took.ok and "holding in GUIDED" in took.reason and mode == "GUIDED"
-    assert result.ok and "duration 2 s reached; handed back in LOITER" in result.reason
+    assert result.ok and "duration 2 s reached; handed back in BRAKE" in result.reason

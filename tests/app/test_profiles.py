@@ -32,7 +32,7 @@ def test_ardupilot_modes() -> None:
     assert ARDUPILOT.is_offboard(4)
     assert not ARDUPILOT.is_offboard(5)
     assert ARDUPILOT.mode_name(17) == "BRAKE"
-    assert (ARDUPILOT.hold.param2, ARDUPILOT.land.param2) == (5, 9)
+    assert (ARDUPILOT.hold.param2, ARDUPILOT.land.param2) == (17, 9)
 
 
 def test_what_each_output_mode_needs() -> None:

@@ -32,7 +32,7 @@ def test_blackout_in_rates_mode_stays_level_and_holds_height(tmp_path, profile: 
     with spawn(own_clock(profile, hover(), truth_log, blackout_s=BLACKOUT_S, windows_from_offboard=True)) as mock:
         outcome = run_fly(mock.ports.udp, config, tmp_path / "log", *flags)
     truth = read_truth(truth_log)
-    hold = "AUTO.LOITER" if profile == "px4" else "LOITER"
+    hold = "AUTO.LOITER" if profile == "px4" else "BRAKE"
     offboard = "OFFBOARD" if profile == "px4" else "GUIDED"
     t_offboard = float(truth.time_s[truth.mode.index(offboard)])
     t0, t1 = t_offboard + BLACKOUT_S[0], t_offboard + BLACKOUT_S[1]

@@ -26,7 +26,7 @@ def test_jitter_in_rates_mode_flies_or_ends_safely(tmp_path, profile: str) -> No
     with spawn(own_clock(profile, hover(), truth_log, jitter_s=0.05)) as mock:
         outcome = run_fly(mock.ports.udp, config, tmp_path / "log", *flags)
     truth = read_truth(truth_log)
-    hold = "AUTO.LOITER" if profile == "px4" else "LOITER"
+    hold = "AUTO.LOITER" if profile == "px4" else "BRAKE"
     offboard = "OFFBOARD" if profile == "px4" else "GUIDED"
     flown = truth.time_s >= truth.time_s[truth.mode.index(offboard)]
     tilt = float(truth.tilt_deg[flown].max())

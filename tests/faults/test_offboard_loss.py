@@ -70,7 +70,7 @@ def test_ardupilot_attitude_output_warns_that_the_vehicle_would_drift(tmp_path) 
             fly_udpin(app_port, config, tmp_path / "b", *flags, "--offboard-loss", "hold")
         modes = mock.call(lambda m: [e.text for e in m.autopilot.log if e.text.startswith("mode ")])
     assert err.value.field == "--offboard-loss" and "cannot be configured on ArduPilot" in err.value.reason
-    assert modes[-1] == "mode GUIDED -> LOITER" and sum("-> GUIDED" in m for m in modes) == 1  # the refused second asked for nothing
+    assert modes[-1] == "mode GUIDED -> BRAKE" and sum("-> GUIDED" in m for m in modes) == 1  # the refused second asked for nothing
 
 
 def _kill_mid_flight(tmp_path: Path, profile: str, *flags: str) -> tuple[list[str], np.ndarray, np.ndarray, str]:

@@ -1,4 +1,4 @@
-"""ArduPilot Copter: GUIDED, LOITER / LAND; MAV_CMD_NAV_TAKEOFF; GUID_OPTIONS; jerk limits."""
+"""ArduPilot Copter: GUIDED, BRAKE / LAND; MAV_CMD_NAV_TAKEOFF; GUID_OPTIONS; jerk limits."""
 
 from __future__ import annotations
 
