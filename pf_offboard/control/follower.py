@@ -271,6 +271,7 @@ class PathFollower:
             compensator = InnerLoopCompensator(
                 self.vehicle, observer_rad_s=c.observer_rad_s,
                 speed_integral_rad_s=c.integral_rad_s, offset_integral_rad_s=c.integral_rad_s,
+                adapt=c.identify_online and self.vehicle == VehicleModel.typical(),
             )  # fmt: skip
         self.compensator = compensator
         self._measured_projector: Any = None
