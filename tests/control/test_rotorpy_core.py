@@ -99,11 +99,11 @@ def measure(path: Path, t: np.ndarray, p: np.ndarray, speed: float, window_s: fl
     return float(np.sqrt(np.mean(ct[win] ** 2))), float(np.sqrt(np.mean(e[win] ** 2))), float(np.mean(e[win]))
 
 
-def _run(follower_for, mode: str, wind_m_s: float, label: str):
+def _run(follower_for, mode: str, wind_m_s: float, label: str, seconds: float = FLIGHT_S, window_s: float = WINDOW_S):
     path = figure_eight()
-    t, p = fly(path, follower_for(path), mode, FLIGHT_S, wind=(wind_m_s, 0.0, 0.0))
-    ct, rms, mean = measure(path, t, p, SPEED_M_S, WINDOW_S)
-    print(f"rotorpy {label} {mode}, wind {wind_m_s:g} m/s: cross-track RMS {100 * ct:.2f} cm, "
+    t, p = fly(path, follower_for(path), mode, seconds, wind=(wind_m_s, 0.0, 0.0))
+    ct, rms, mean = measure(path, t, p, SPEED_M_S, window_s)
+    print(f"rotorpy {label} {mode}, wind {wind_m_s:g} m/s, {window_s:g}-{seconds:g} s: cross-track RMS {100 * ct:.2f} cm, "
           f"speed error RMS {100 * rms:.2f} cm/s (mean {100 * mean:+.2f})")  # fmt: skip
     return ct, rms, mean
 
@@ -120,15 +120,22 @@ def test_defaults_in_rotorpy(mode, wind_m_s):
     assert ct <= 0.03 and rms <= 0.04 and abs(mean) <= 0.03
 
 
-def test_identified_in_flight_meets_the_target_in_still_air():
+@pytest.mark.parametrize("wind_m_s,seconds,window_s", [(0.0, FLIGHT_S, WINDOW_S), (3.0, 22.0, 12.0)])
+def test_identified_in_flight_meets_the_targets_with_acceleration_output(wind_m_s, seconds, window_s):
     """``Compensation(identify_online=True)``: the bank of inner-loop models (control/adaptive.py)
-    finds rotorpy's dead time (about 0) and drag (0.46 against the 0.45 1/s rotorpy's rotor drag
-    gives at hover) within the first 3-4 s. Measured: 0.26 cm, 0.32 cm/s (default: 2.2 cm)."""
+    finds rotorpy's dead time (about 0) and drag (0.44 against the 0.45 1/s rotorpy's rotor drag
+    gives at hover) within the first 3-4 s in still air; in the wind (quadratic drag, translational
+    lift) its scores part later (adopted after about 8 s), hence the later window. Measured: still
+    0.26 cm, 0.31 cm/s RMS (default 2.2 cm); 3 m/s wind 0.45 cm, mean -0.33 cm/s (default 2.4 cm,
+    +2.4 cm/s)."""
     def follower(path: Path) -> PathFollower:
         return PathFollower(path, SPEED_M_S, compensation=Compensation(identify_online=True))
 
-    ct, rms, mean = _run(follower, "acceleration", 0.0, "identify_online")
-    assert ct <= 0.003 and rms <= 0.02
+    ct, rms, mean = _run(follower, "acceleration", wind_m_s, "identify_online", seconds, window_s)
+    if wind_m_s == 0.0:
+        assert ct <= 0.003 and rms <= 0.02
+    else:
+        assert ct <= 0.005 and abs(mean) <= 0.02
 
 
 def test_the_papers_law_flies_slow_in_the_wind():
