@@ -6,7 +6,9 @@ output adds the caller's own attitude loop (0.25 s). A predictor built on the wr
 on the state at the wrong instant and leaves centimetres of error that no gain removes. This bank
 of models scores candidate (lag, delay) pairs against the measured horizontal velocity, each with
 its own slow disturbance observer (so that a constant drag or wind is absorbed, not the dynamic
-mismatch), and names the one that explains the flight best.
+mismatch), and names the one that explains the flight best. The compensator (on by default, with
+the typical model only) gives it the model's lag and the dead times up to the model's: it may only
+shorten the dead time (docs/controller.md, Identifying the inner loop in flight).
 
 Per candidate ``k`` and horizontal axis: ``a_f' = (gain a_sp(t - delay_k) - a_f) / lag_k``,
 ``v_k' = a_f + d_k + l1 (v - v_k)``, ``d_k' = l2 (v - v_k)``; score = low-passed ``|v - v_k|^2``.

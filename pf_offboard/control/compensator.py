@@ -53,7 +53,10 @@ ADAPT_DRAG_SLEW = 0.5  # 1/s per s
 
 class InnerLoopCompensator:
     """Stateful, I/O-free. Call :meth:`predict` with each fresh state sample, then :meth:`invert`
-    with the law's acceleration; :meth:`invert` records the setpoint it returns as sent."""
+    with the law's acceleration; :meth:`invert` records the setpoint it returns as sent.
+    ``adapt``: identify a shorter dead time and the horizontal drag in flight
+    (:class:`~pf_offboard.control.adaptive.ResponseIdentifier`; the follower turns it on with
+    ``Compensation.identify_online`` and the typical model)."""
 
     def __init__(
         self,
