@@ -108,41 +108,43 @@ def _run(follower_for, mode: str, wind_m_s: float, label: str, seconds: float = 
     return ct, rms, mean
 
 
+@pytest.mark.parametrize("mode", ["acceleration", "rates"])
+@pytest.mark.parametrize("wind_m_s", [0.0, 3.0])
+def test_defaults_in_rotorpy(mode, wind_m_s):
+    """``PathFollower(path, speed)`` as is. Measured (window 6-12 s): acceleration 2.2 cm, 2.8 cm/s
+    RMS still / 2.3 cm, mean +2.4 cm/s in the wind; rates 1.4 cm, 2.1 cm/s / 1.7 cm, +0.6 cm/s.
+    The issue's targets (<= 0.3 cm still, <= 0.5 cm in wind) are NOT met by the default: its
+    typical inner-loop model assumes a 0.1 s dead time, rotorpy's attitude loop has about none
+    (acceleration), and with rates output the response is the attitude law's 0.25 s lag."""
+    ct, rms, mean = _run(lambda path: PathFollower(path, SPEED_M_S), mode, wind_m_s, "defaults")
+    assert ct <= 0.025 and rms <= 0.035 and abs(mean) <= 0.03
+
+
 @pytest.mark.parametrize("wind_m_s,seconds,window_s", [(0.0, FLIGHT_S, WINDOW_S), (3.0, 22.0, 12.0)])
-def test_defaults_meet_the_targets_with_acceleration_output(wind_m_s, seconds, window_s):
-    """``PathFollower(path, speed)`` as is, ``cmd_acc``. The default identifies the inner loop's
-    dead time and drag in flight (``compensation.identify_online``, control/adaptive.py): rotorpy's
-    dead time (about 0, the guess says 0.1 s) and drag (0.44 against the 0.45 1/s rotorpy's rotor
-    drag gives at hover) are adopted within 3-4 s in still air; in the wind (quadratic drag,
-    translational lift) the candidates' scores part later (adopted after about 8 s), hence the later
-    window. Measured: still 0.26 cm, 0.31 cm/s RMS; 3 m/s wind 0.45 cm, mean -0.33 cm/s."""
-    ct, rms, mean = _run(lambda path: PathFollower(path, SPEED_M_S), "acceleration", wind_m_s, "defaults", seconds, window_s)
+def test_identified_in_flight_meets_the_targets_with_acceleration_output(wind_m_s, seconds, window_s):
+    """``Compensation(identify_online=True)`` (control/adaptive.py): rotorpy's dead time (about 0,
+    the guess says 0.1 s) and drag (0.44 against the 0.45 1/s rotorpy's rotor drag gives at hover)
+    are adopted within 3-4 s in still air; in the wind (quadratic drag, translational lift) the
+    candidates' scores part later (adopted after about 8 s), hence the later window. Measured:
+    still 0.26 cm, 0.31 cm/s RMS; 3 m/s wind 0.45 cm, mean -0.33 cm/s."""
+    def follower(path: Path) -> PathFollower:
+        return PathFollower(path, SPEED_M_S, compensation=Compensation(identify_online=True))
+
+    ct, rms, mean = _run(follower, "acceleration", wind_m_s, "identify_online", seconds, window_s)
     if wind_m_s == 0.0:
         assert ct <= 0.003 and rms <= 0.02
     else:
         assert ct <= 0.005 and abs(mean) <= 0.02
 
 
-@pytest.mark.parametrize("wind_m_s", [0.0, 3.0])
-def test_defaults_with_rates_output(wind_m_s):
-    """``cmd_ctbr`` through the core's attitude-rate law (tau 0.25 s). Measured 1.4 cm, 2.1 cm/s
-    still; 1.7 cm, mean +0.6 cm/s in the wind. The issue's 0.3 / 0.5 cm are NOT met here: the
-    response is the attitude law's 0.25 s lag, slower than the guess, and the in-flight
-    identification only ever shortens the dead time (a longer prediction with the same gains flew
-    worse)."""
-    ct, rms, mean = _run(lambda path: PathFollower(path, SPEED_M_S), "rates", wind_m_s, "defaults")
-    assert ct <= 0.025 and rms <= 0.03 and abs(mean) <= 0.02
-
-
-def test_the_typical_guess_alone_misses_by_centimetres():
-    """Without the identification (``identify_online=False``: the typical model's 0.1 s dead
-    time, no drag) the same flight is 2.2 cm, 2.8 cm/s: the predictor acts on the state 0.1 s
-    ahead of the one the setpoint meets."""
+def test_identification_leaves_rates_output_alone():
+    """With rates output the response is slower than the guess; the identification only ever
+    shortens the dead time, so nothing is adopted and the flight is the default's (1.4 cm)."""
     def follower(path: Path) -> PathFollower:
-        return PathFollower(path, SPEED_M_S, compensation=Compensation(identify_online=False))
+        return PathFollower(path, SPEED_M_S, compensation=Compensation(identify_online=True))
 
-    ct, rms, mean = _run(follower, "acceleration", 0.0, "identify_online=False")
-    assert ct > 0.01
+    ct, rms, mean = _run(follower, "rates", 0.0, "identify_online")
+    assert ct <= 0.025 and rms <= 0.035
 
 
 def test_the_papers_law_flies_slow_in_the_wind():
