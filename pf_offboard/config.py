@@ -475,7 +475,8 @@ def _flight(data: Any) -> FlightConfig:
 
 
 def _compensation(data: Any) -> Compensation:
-    d = _section(data, "compensation", ("enabled", "observer_rad_s", "integral_rad_s", "phase_margin_deg", "tangential_phase_margin_deg"))
+    d = _section(data, "compensation", ("enabled", "observer_rad_s", "integral_rad_s", "phase_margin_deg", "tangential_phase_margin_deg",
+                                        "identify_online"))
     c = Compensation()
     return Compensation(
         enabled=_bool(d, "enabled", "compensation.enabled", c.enabled),
@@ -485,6 +486,7 @@ def _compensation(data: Any) -> Compensation:
         tangential_phase_margin_deg=_number(  # type: ignore[arg-type]
             d, "tangential_phase_margin_deg", "compensation.tangential_phase_margin_deg", c.tangential_phase_margin_deg, 10.0, 80.0,
         ),
+        identify_online=_bool(d, "identify_online", "compensation.identify_online", c.identify_online),
     )
 
 

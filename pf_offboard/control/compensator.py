@@ -36,6 +36,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 
+from pf_offboard.control.adaptive import DELAYS_S, ResponseIdentifier
 from pf_offboard.control.types import GRAVITY_M_S2, Compensation, VehicleModel
 from pf_offboard.errors import InputError
 
@@ -45,11 +46,17 @@ _ZERO: Vec = (0.0, 0.0, 0.0)
 # A telemetry gap longer than this (s) makes the observer and predictor start over: integrating the
 # model across it would extrapolate commands the vehicle may not have flown.
 MAX_GAP_S = 0.25
+# How fast the identified lag and dead time may move the model (s per s of flight).
+ADAPT_SLEW = 0.1
+ADAPT_DRAG_SLEW = 0.5  # 1/s per s
 
 
 class InnerLoopCompensator:
     """Stateful, I/O-free. Call :meth:`predict` with each fresh state sample, then :meth:`invert`
-    with the law's acceleration; :meth:`invert` records the setpoint it returns as sent."""
+    with the law's acceleration; :meth:`invert` records the setpoint it returns as sent.
+    ``adapt``: identify a shorter dead time and the horizontal drag in flight
+    (:class:`~pf_offboard.control.adaptive.ResponseIdentifier`; the follower turns it on with
+    ``Compensation.identify_online`` and the typical model)."""
 
     def __init__(
         self,
@@ -61,6 +68,7 @@ class InnerLoopCompensator:
         offset_integral_rad_s: float = Compensation.integral_rad_s,
         max_speed_offset_m_s: float = 0.3,
         max_position_offset_m: float = 0.1,
+        adapt: bool = False,
     ) -> None:
         if not (math.isfinite(observer_rad_s) and 0.0 <= observer_rad_s <= 50.0):
             raise InputError("gains.disturbance_observer_rad_s", f"must be in [0, 50], got {observer_rad_s!r}")
@@ -81,7 +89,16 @@ class InnerLoopCompensator:
         self.drag: Vec = (model.drag_xy_1_s, model.drag_xy_1_s, model.drag_z_1_s)
         self.observer_rad_s = float(observer_rad_s)
         self.max_disturbance_m_s2 = float(max_disturbance_m_s2)
-        self._history_s = self.horizon_s + MAX_GAP_S
+        # in-flight identification of the dead time and drag (adaptive.py; None: the model's). It
+        # may only shorten the dead time: the gains were derived for the model, and a slower
+        # response needs lower gains, not a longer prediction (a longer one, adopted on the
+        # mock's PX4 SIH preset, flew worse on 12 of 34 held-out flights)
+        self.identifier: ResponseIdentifier | None = ResponseIdentifier(
+            model.accel_gain_xy, delays_s=[d for d in DELAYS_S if d <= self.delay_s], lags_s=(model.accel_lag_xy_s,),
+            initial=(model.accel_lag_xy_s, self.delay_s)) if adapt else None  # fmt: skip
+        self._target: tuple[float, float] | None = None
+        longest = max(self.horizon_s, self.identifier.max_delay_s) if self.identifier is not None else self.horizon_s
+        self._history_s = longest + MAX_GAP_S
         for name, value in (("speed_integral_rad_s", speed_integral_rad_s), ("offset_integral_rad_s", offset_integral_rad_s),
                             ("max_speed_offset_m_s", max_speed_offset_m_s), ("max_position_offset_m", max_position_offset_m)):
             if not (math.isfinite(value) and 0.0 <= value <= 100.0):
@@ -107,6 +124,8 @@ class InnerLoopCompensator:
         self.speed_offset_m_s = 0.0  # added to eta2_ref
         self.xi1_offset_m = 0.0  # added to the law's xi1, phi1
         self.phi1_offset_m = 0.0
+        if getattr(self, "identifier", None) is not None:
+            self.identifier.reset()
 
     def integral_offsets(self) -> tuple[float, float, float]:
         """(eta2_ref offset m/s, xi1 offset m, phi1 offset m) the law adds to its inputs."""
@@ -189,7 +208,32 @@ class InnerLoopCompensator:
         self._v_hat = (vh[0], vh[1], vh[2])
         self.disturbance = (dh[0], dh[1], dh[2])
         self._t = time_s
+        if self.identifier is not None:
+            self._adapt(t_prev, time_s, velocity)
         return self._extrapolate(time_s, position, velocity)
+
+    def _adapt(self, t_prev: float, time_s: float, velocity: Vec) -> None:
+        """Score the candidate models and move the lag and dead time towards the best one at
+        ADAPT_SLEW (s per s): the prediction horizon never jumps."""
+        assert self.identifier is not None
+        best = self.identifier.update(time_s, velocity, self._pieces, True)
+        if best is not None:
+            self._target = best
+        if self._target is None:
+            return
+        step = ADAPT_SLEW * (time_s - t_prev)
+        lag, delay = self._target
+        cur_lag, cur_delay = self.lag[0], self.delay_s
+        new_lag = cur_lag + max(-step, min(step, lag - cur_lag))
+        new_delay = cur_delay + max(-step, min(step, delay - cur_delay))
+        self.lag = (new_lag, new_lag, self.lag[2])
+        drag = self.identifier.drag_1_s
+        if drag is not None:
+            cur = self.drag[0]
+            new_drag = cur + max(-ADAPT_DRAG_SLEW * (time_s - t_prev), min(ADAPT_DRAG_SLEW * (time_s - t_prev), drag - cur))
+            self.drag = (new_drag, new_drag, self.drag[2])
+        self.delay_s = self.delay_z_s = self.horizon_s = new_delay
+        self.hold_s = (0.0, 0.0, 0.0)
 
     def _extrapolate(self, time_s: float, position: Vec, velocity: Vec) -> tuple[Vec, Vec]:
         """Integrate the model from the measurement over the setpoints already sent (Smith) to

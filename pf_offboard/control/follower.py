@@ -271,6 +271,7 @@ class PathFollower:
             compensator = InnerLoopCompensator(
                 self.vehicle, observer_rad_s=c.observer_rad_s,
                 speed_integral_rad_s=c.integral_rad_s, offset_integral_rad_s=c.integral_rad_s,
+                adapt=c.identify_online and self.vehicle == VehicleModel.typical(),
             )  # fmt: skip
         self.compensator = compensator
         self._measured_projector: Any = None
@@ -439,6 +440,10 @@ class PathFollower:
         if offsets is not None and w < 1.0:
             # integral action as reference offsets: the law's limits and shaping act unchanged
             b_eta2, b_xi1, b_phi1 = offsets
+            if not self._closed and abs(eta2_ref) < abs(self.speed):
+                # slowing down to stop at an open path's end: the speed offset fades with the
+                # reference (a negative one would otherwise stall the vehicle short of the end)
+                b_eta2 *= abs(eta2_ref) / abs(self.speed)
             eta2_ref_law = eta2_ref + b_eta2
             terms = terms._replace(state=st._replace(xi1=st.xi1 + b_xi1, phi1=st.phi1 + b_phi1))
         tube: LawOutput | None = None

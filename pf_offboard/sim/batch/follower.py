@@ -483,6 +483,8 @@ class BatchFollower:
         st = terms
         if offsets is not None:
             b_eta2, b_xi1, b_phi1 = offsets
+            if not self._closed:  # the speed offset fades with the reference at an open path's end (as the scalar's)
+                b_eta2 = np.where(np.abs(eta2_ref) < abs(self.speed), b_eta2 * np.abs(eta2_ref) / abs(self.speed), b_eta2)
             use = w < 1.0
             eta2_ref_law = np.where(use, eta2_ref + b_eta2, eta2_ref)
             terms = terms._replace(xi1=np.where(use, terms.xi1 + b_xi1, terms.xi1), phi1=np.where(use, terms.phi1 + b_phi1, terms.phi1))
