@@ -58,11 +58,12 @@ def test_fly_logs_replay_and_plot(
     state_msg = "ODOMETRY" if state_source == "odometry" else "LOCAL_POSITION_NED"
     assert sum(e.message.get_type() == state_msg for e in entries) >= len(records)
     # SET_MESSAGE_INTERVAL (COMMAND_LONG 511) to the target: the state stream and ATTITUDE_QUATERNION
-    # at the setpoint rate (paper.yaml: 100 Hz), HEARTBEAT at 10 Hz; the autopilot accepts each
+    # at the setpoint rate (paper.yaml: 100 Hz), HEARTBEAT at 10 Hz, POSITION_TARGET_LOCAL_NED (the
+    # autopilot's echoed target, evidence of another controller) at 25 Hz; the autopilot accepts each
     state_id = 331 if state_source == "odometry" else 32
     requests = {int(m.param1): m.param2 for m in (e.message for e in entries if e.direction == "out")
                 if m.get_type() == "COMMAND_LONG" and m.command == 511 and (m.target_system, m.target_component) == (1, 1)}  # fmt: skip
-    assert requests == {state_id: 1e4, 31: 1e4, 0: 1e5}
+    assert requests == {state_id: 1e4, 31: 1e4, 0: 1e5, 85: 4e4}
     acks = [e.message.result for e in entries if e.direction == "in" and e.message.get_type() == "COMMAND_ACK" and e.message.command == 511]
     assert acks and set(acks) == {0}  # MAV_RESULT_ACCEPTED
     # pymavlink's own mavlogdump.py reads the real flight log: every frame, in and out, same types
