@@ -544,6 +544,9 @@ class BatchFollower:
                 bad = ~np.all(np.isfinite(np.array(y + v)), axis=0)
                 if bad.any():
                     raise FloatingPointError("batch compensator: a non-finite prediction (the scalar one resets here)")
+                # as the scalar: the measured state's closest point first, the law's searched from it
+                lam_meas = self._measured_projector.update(*y_meas)  # type: ignore[union-attr]
+                self.projector.seed(lam_meas, *y, *y_meas)
             lam, s, terms = self._terms(y, v)
             ramp = self._ramp
             if ramp is not None and not ramp.done.all():
@@ -577,7 +580,7 @@ class BatchFollower:
             omega = body_rates(axes, thrust, jerk_rates, yaw_rate)
             finite = np.all(np.isfinite(np.array((ax, ay, az, *q, *omega, thrust, psi, yaw_rate))), axis=0)
             if comp is not None:
-                lam = self._measured_projector.update(*y_meas)  # type: ignore[union-attr]
+                lam = lam_meas
                 sm, mt = self.terms_at(lam, y_meas, v_meas)
                 dist = np.sqrt((y_meas[0] - sm[0]) ** 2 + (y_meas[1] - sm[1]) ** 2 + (y_meas[2] - sm[2]) ** 2)
                 t_m = sm[3:6]

@@ -122,6 +122,23 @@ class BatchProjector:
             lam[i], d2[i] = self.scalar._global(float(x[i]), float(y[i]), float(z[i]))
 
     # ------------------------------------------------------------------ public
+    def seed(self, lam: Arr, x: Arr, y: Arr, z: Arr, nx: Arr, ny: Arr, nz: Arr) -> None:
+        """``Projector.seed`` for every flight: the next :meth:`update` of (x, y, z) searches around
+        ``lam`` (the closest points of the nearby (nx, ny, nz)) moved along the tangent."""
+        with np.errstate(all="ignore"):
+            s = self._ev(lam)
+            d1x, d1y, d1z = s[3], s[4], s[5]
+            sp2 = d1x * d1x + d1y * d1y + d1z * d1z
+            shift = np.where(sp2 > 0.0, ((x - nx) * d1x + (y - ny) * d1y + (z - nz) * d1z) / np.where(sp2 > 0.0, sp2, 1.0), 0.0)
+        start = lam + shift
+        if not self._closed:
+            start = np.minimum(np.maximum(start, 0.0), self._lam_max)
+        self._lam = np.asarray(start, dtype=float)
+        self._y = np.array((x, y, z), dtype=float)
+        self._dlam = np.zeros(self.n)
+        self._count = np.zeros(self.n, dtype=np.int64)
+        self._valid[:] = True
+
     def update(self, x: Arr, y: Arr, z: Arr) -> Arr:
         """``Projector.update`` for every flight: lambda* of positions (x, y, z) (ENU, m)."""
         with np.errstate(all="ignore"):
