@@ -61,6 +61,14 @@ JERK_FLOOR_SPEED_M_S = 0.25  # speed used in the jerk bound below it (m/s): see 
 # the px4-sih mock at max_speed 3 m/s the full 0.7 saturated the speed loop 45-81 % of the flight
 # (14-124 cm off the path), 0.5 flew 2.7-6.2 cm.
 RESPONSE_REFERENCE_S = 0.5
+# The jerk smoothing uses at most this share of ``max_body_rate_rad_s * g`` as its jerk bound: the
+# tangential jerk alone turns the thrust vector at up to ~J/|f| (|f| ~ g), and lowering the speed
+# cannot undo a tilt rate the jerk itself causes. Without this cap, a jerk bound above ~10x the rate
+# bound (e.g. 30 m/s^3 with 3 rad/s) made the rate loop lower the speed until the 20 rounds ran out:
+# 0.6-1.4 m/s planned instead of 2.2-2.7 on the held-out paths at max 3 m/s, and the tilt-rate bound
+# still exceeded. 0.5 keeps the planned speed non-decreasing in the jerk bound (0.7 did not at
+# accel_share 1) and leaves the defaults (10 m/s^3, 3 rad/s -> 14.7) unchanged.
+JERK_RATE_SHARE = 0.5
 
 
 def response_share(accel_share: float, response_s: float) -> float:
@@ -76,7 +84,8 @@ class SpeedProfileSpec:
     ``speed_m_s``). ``table_eta1_m_speed_m_s``: optional ((eta1_m, speed_m_s), ...) caps,
     interpolated linearly over eta1 (constant beyond an open path's table, periodic on a closed
     one). ``max_tangential_accel_m_s2`` / ``max_tangential_jerk_m_s3``: bounds on dV/dt and
-    d2V/dt2 along the path. ``accel_share``: share (0, 1] of the limits the reference motion may
+    d2V/dt2 along the path (the smoothing plans with at most ``JERK_RATE_SHARE *
+    max_body_rate_rad_s * g``: a larger jerk alone would turn the thrust vector too fast). ``accel_share``: share (0, 1] of the limits the reference motion may
     use; the rest is the feedback's margin. ``max_body_rate_rad_s``: the speed is capped where the
     path's own jerk ``|sigma_sss| V^3`` would turn the thrust vector (|f| ~ g) faster than this
     (rates mode bounds the commanded rates: 3.5 rad/s by default).
@@ -382,6 +391,8 @@ class SpeedProfile:
         the share of the limits the reference uses (:func:`response_share`)."""
         self.spec = spec
         self.response_s = float(response_s)
+        # the jerk the smoothing plans with (see JERK_RATE_SHARE)
+        self.jerk_bound_m_s3 = min(spec.max_tangential_jerk_m_s3, JERK_RATE_SHARE * spec.max_body_rate_rad_s * G)
         self.direction = 1.0 if direction >= 0.0 else -1.0
         self.closed = bool(path.closed)
         self.length_m = float(path.length_m)
@@ -423,7 +434,7 @@ class SpeedProfile:
         b = ub
         for _ in range(20):
             b_pass = _passes(ub, feas, ds, closed)
-            smooth = _jerk_smooth(b_pass, feas, ds, self.spec.max_tangential_jerk_m_s3, closed)
+            smooth = _jerk_smooth(b_pass, feas, ds, self.jerk_bound_m_s3, closed)
             if smooth is None:
                 raise InputError("speed_profile", "no jerk-bounded speed profile found (solver failed)")
             b = smooth

@@ -15,7 +15,7 @@ from pf_offboard import PathFollower
 from pf_offboard.config import load_config, parse_config
 from pf_offboard.control.feasible import ThrustSet
 from pf_offboard.control.feedforward import onpath_derivatives
-from pf_offboard.control.profile import SpeedProfileSpec, point_mass_lap_time
+from pf_offboard.control.profile import JERK_RATE_SHARE, SpeedProfileSpec, point_mass_lap_time
 from pf_offboard.errors import ConfigError
 
 SPEC = SpeedProfileSpec(5.0, max_tangential_accel_m_s2=3.0, max_tangential_jerk_m_s3=10.0, accel_share=0.7)
@@ -184,3 +184,19 @@ def test_feedforward_key() -> None:
     with pytest.raises(ConfigError) as err:
         parse_config(data)
     assert err.value.field == "feedforward" and "on_path, any_state" in err.value.reason
+
+
+def test_a_larger_jerk_bound_never_plans_slower() -> None:
+    """The tangential jerk alone turns the thrust vector (~J/g): before the smoothing capped its jerk
+    at JERK_RATE_SHARE * max_body_rate * g, a jerk bound of 30 m/s^3 with the default 3 rad/s planned
+    1.35 m/s on this figure-eight (2.21 at 10) and 0.65 at 100, still over the rate bound."""
+    times, bounds = [], []
+    for jerk in (10.0, 30.0, 100.0):
+        spec = SpeedProfileSpec(3.0, max_tangential_jerk_m_s3=jerk)
+        f = _follower(ROOT / "tests" / "real_sitl" / "configs" / "figure8-tilted.yaml", spec)
+        times.append(f.profile.stats.travel_time_s)
+        assert f.profile.stats.max_tilt_rate_rad_s <= spec.max_body_rate_rad_s * 1.01
+        bounds.append(f.profile.jerk_bound_m_s3)
+    assert times[1] <= times[0] * 1.001 and times[2] == pytest.approx(times[1], rel=1e-6)
+    assert f.path.length_m / times[2] > 2.2  # m/s mean planned (1.35 / 0.65 before the cap)
+    assert bounds == pytest.approx([10.0, JERK_RATE_SHARE * 3.0 * 9.81, JERK_RATE_SHARE * 3.0 * 9.81], rel=1e-3)
