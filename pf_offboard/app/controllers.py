@@ -34,12 +34,14 @@ ECHO_MESSAGE = "POSITION_TARGET_LOCAL_NED"
 # POSITION_TARGET_TYPEMASK: x, y, z, vx, vy, vz ignore bits
 _POSITION_VELOCITY_BITS = (1, 2, 4, 8, 16, 32)
 _FIELDS = ("x", "y", "z", "vx", "vy", "vz")
+# the messages that can carry a position or velocity target: the setpoints but attitude, and the echo
+_POSITION_TARGETS = (SETPOINT_MESSAGES - {"SET_ATTITUDE_TARGET"}) | {ECHO_MESSAGE}
 
 
 def carries_position_or_velocity(msg: Any) -> bool:
     """A (SET_)POSITION_TARGET_* message whose position or velocity fields are in use (bit clear,
     value finite)."""
-    if msg.get_type() not in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT", ECHO_MESSAGE):
+    if msg.get_type() not in _POSITION_TARGETS:
         return False
     mask = int(getattr(msg, "type_mask", 0xFFFF))
     names = ("lat_int", "lon_int", "alt", "vx", "vy", "vz") if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT" else _FIELDS

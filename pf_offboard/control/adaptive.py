@@ -70,12 +70,11 @@ class ResponseIdentifier:
         """The active candidate's horizontal linear drag (1/s), None before one is adopted."""
         return None if self.active is None else self._drag[self.active]
 
-    def update(self, time_s: float, velocity: Vec, pieces: Callable[[float, float, float], list[tuple[float, Vec]]],
-               excited: bool) -> tuple[float, float] | None:  # fmt: skip
+    def update(self, time_s: float, velocity: Vec,
+               pieces: Callable[[float, float, float], list[tuple[float, Vec]]]) -> tuple[float, float] | None:  # fmt: skip
         """Advance every candidate to ``time_s`` with the setpoints acting then (``pieces(t0, t1,
         delay)``, as the compensator's), correct with the measured ``velocity``; return the (lag,
-        delay) to adopt, or None to keep the current model. ``excited``: score this step (the
-        setpoints change enough to tell the candidates apart)."""
+        delay) to adopt, or None to keep the current model."""
         t_prev, self._t = self._t, time_s
         vx, vy = velocity[0], velocity[1]
         if t_prev is None:
@@ -88,7 +87,7 @@ class ResponseIdentifier:
         nl = len(self.lags)
         w = OBSERVER_RAD_S
         l1, l2 = 2.0 * w * dt, w * w * dt
-        c = min(1.0, dt / SCORE_TIME_S) if excited else 0.0
+        c = min(1.0, dt / SCORE_TIME_S)
         g = self.gain
         for i, delay in enumerate(self.delays):
             segs = pieces(t_prev, time_s, delay)
@@ -113,10 +112,8 @@ class ResponseIdentifier:
                 v[1] += l1 * ey
                 d[0] += l2 * ex
                 d[1] += l2 * ey
-                if c:
-                    self.score[k] += c * (ex * ex + ey * ey - self.score[k])
-        if excited:
-            self.data_s += dt
+                self.score[k] += c * (ex * ex + ey * ey - self.score[k])
+        self.data_s += dt
         if self.data_s < MIN_DATA_S:
             return None
         best = min(range(len(self.score)), key=self.score.__getitem__)

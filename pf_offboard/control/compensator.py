@@ -216,7 +216,7 @@ class InnerLoopCompensator:
         """Score the candidate models and move the lag and dead time towards the best one at
         ADAPT_SLEW (s per s): the prediction horizon never jumps."""
         assert self.identifier is not None
-        best = self.identifier.update(time_s, velocity, self._pieces, True)
+        best = self.identifier.update(time_s, velocity, self._pieces)
         if best is not None:
             self._target = best
         if self._target is None:
@@ -229,8 +229,8 @@ class InnerLoopCompensator:
         self.lag = (new_lag, new_lag, self.lag[2])
         drag = self.identifier.drag_1_s
         if drag is not None:
-            cur = self.drag[0]
-            new_drag = cur + max(-ADAPT_DRAG_SLEW * (time_s - t_prev), min(ADAPT_DRAG_SLEW * (time_s - t_prev), drag - cur))
+            cur, drag_step = self.drag[0], ADAPT_DRAG_SLEW * (time_s - t_prev)
+            new_drag = cur + max(-drag_step, min(drag_step, drag - cur))
             self.drag = (new_drag, new_drag, self.drag[2])
         self.delay_s = self.delay_z_s = self.horizon_s = new_delay
         self.hold_s = (0.0, 0.0, 0.0)

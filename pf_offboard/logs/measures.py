@@ -199,8 +199,7 @@ class LapTimer:
     def __init__(self, length_m: float) -> None:
         self.length_m = float(length_m)
         self.laps_s: list[float] = []
-        self._t_start = math.nan  # activation
-        self._t_lap = math.nan  # start of the lap being flown
+        self._t_lap = math.nan  # start of the lap being flown (the first: activation)
         self._last: tuple[float, float] | None = None
         self._progress = 0.0  # signed net progress (m)
         self._sign = 0.0  # direction of travel (the first non-zero reference speed's sign)
@@ -211,7 +210,7 @@ class LapTimer:
         if self._sign == 0.0 and math.isfinite(speed_ref_m_s) and speed_ref_m_s != 0.0:
             self._sign = 1.0 if speed_ref_m_s > 0.0 else -1.0
         if self._last is None:
-            self._t_start = self._t_lap = time_s
+            self._t_lap = time_s
             self._last = (time_s, eta1_m)
             return
         t0, e0 = self._last
