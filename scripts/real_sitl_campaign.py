@@ -1,6 +1,6 @@
 """Fly the default config (a path and a speed) on the real autopilots in SITL and measure it.
 
-Each flight runs in its own network namespace (``unshare -n``, loopback only): a fresh SITL (PX4
+Each flight runs in its own network namespace (``unshare -n``, loopback only) and /tmp: a fresh SITL (PX4
 SIH from a private working directory, or ArduCopter SITL from a private directory), then
 ``pf-offboard fly --takeoff 2`` as a user runs it, then the SITL is stopped. Figures from the step
 log with :mod:`pf_offboard.logs.measures` (speed along the path from the position's derivative,
@@ -395,8 +395,12 @@ def start_figures(result: dict[str, Any]) -> str:
 
 # ------------------------------------------------------------------------------------ the campaign
 def in_namespace(spec_file: Path) -> list[str]:
-    inner = f"ip link set lo up && exec {shlex.quote(sys.executable)} {shlex.quote(str(Path(__file__).resolve()))} --one {shlex.quote(str(spec_file))}"
-    return ["unshare", "-n", "bash", "-c", inner]
+    """The command flying ``spec_file`` in its own network namespace and, when the flight's files
+    are outside /tmp, its own /tmp (PX4 takes /tmp/px4_lock-0: two PX4 SITLs share it otherwise)."""
+    private_tmp = "" if spec_file.resolve().is_relative_to("/tmp") else "mount -t tmpfs tmpfs /tmp && "
+    inner = (f"{private_tmp}ip link set lo up && exec {shlex.quote(sys.executable)} "
+             f"{shlex.quote(str(Path(__file__).resolve()))} --one {shlex.quote(str(spec_file))}")
+    return ["unshare", "-n", "-m", "bash", "-c", inner] if private_tmp else ["unshare", "-n", "bash", "-c", inner]
 
 
 def _lap_times(spec: dict[str, Any]) -> str:
