@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 Vec = tuple[float, float, float]
 
@@ -31,6 +32,17 @@ SCORE_TIME_S = 4.0  # the score's memory
 MIN_DATA_S = 3.0  # of scored flight before a candidate is adopted
 ADOPT_RATIO = 0.8  # the initial model is left only for a candidate with less than this share of its score
 SWITCH_RATIO = 0.6  # a candidate replaces the active one when its score is below this share of it
+
+
+@dataclass(frozen=True)
+class IdentifiedModel:
+    """What the identifier adopted in flight: the horizontal response's first-order lag and dead
+    time, its linear drag (the latest estimate) and when it was adopted (the controller's clock)."""
+
+    lag_s: float
+    delay_s: float
+    drag_1_s: float
+    adopted_at_s: float
 
 
 class ResponseIdentifier:

@@ -36,7 +36,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 
-from pf_offboard.control.adaptive import DELAYS_S, ResponseIdentifier
+from pf_offboard.control.adaptive import DELAYS_S, IdentifiedModel, ResponseIdentifier
 from pf_offboard.control.types import GRAVITY_M_S2, Compensation, VehicleModel
 from pf_offboard.errors import InputError
 
@@ -97,6 +97,7 @@ class InnerLoopCompensator:
             model.accel_gain_xy, delays_s=[d for d in DELAYS_S if d <= self.delay_s], lags_s=(model.accel_lag_xy_s,),
             initial=(model.accel_lag_xy_s, self.delay_s)) if adapt else None  # fmt: skip
         self._target: tuple[float, float] | None = None
+        self.adopted_at_s: float | None = None  # the time of the last adoption
         longest = max(self.horizon_s, self.identifier.max_delay_s) if self.identifier is not None else self.horizon_s
         self._history_s = longest + MAX_GAP_S
         for name, value in (("speed_integral_rad_s", speed_integral_rad_s), ("offset_integral_rad_s", offset_integral_rad_s),
@@ -219,21 +220,39 @@ class InnerLoopCompensator:
         best = self.identifier.update(time_s, velocity, self._pieces)
         if best is not None:
             self._target = best
+            self.adopted_at_s = time_s
         if self._target is None:
             return
-        step = ADAPT_SLEW * (time_s - t_prev)
-        lag, delay = self._target
+        self._move_to_target(time_s - t_prev, self._target, self.identifier.drag_1_s)
+
+    def _move_to_target(self, dt: float, target: tuple[float, float], drag: float | None) -> None:
+        """What an adoption does to the compensator: the lag, the dead time (every axis, held back
+        by none) and the horizontal drag move towards the adopted candidate's at their slew rates.
+        The one place that maps an identified model to the compensator's parameters (mirrored by
+        ``pf_offboard.sim.batch.follower._Compensator._move_to_target``)."""
+        step = ADAPT_SLEW * dt
+        lag, delay = target
         cur_lag, cur_delay = self.lag[0], self.delay_s
         new_lag = cur_lag + max(-step, min(step, lag - cur_lag))
         new_delay = cur_delay + max(-step, min(step, delay - cur_delay))
         self.lag = (new_lag, new_lag, self.lag[2])
-        drag = self.identifier.drag_1_s
         if drag is not None:
-            cur, drag_step = self.drag[0], ADAPT_DRAG_SLEW * (time_s - t_prev)
+            cur, drag_step = self.drag[0], ADAPT_DRAG_SLEW * dt
             new_drag = cur + max(-drag_step, min(drag_step, drag - cur))
             self.drag = (new_drag, new_drag, self.drag[2])
         self.delay_s = self.delay_z_s = self.horizon_s = new_delay
         self.hold_s = (0.0, 0.0, 0.0)
+
+    @property
+    def identified(self) -> IdentifiedModel | None:
+        """The model the identifier adopted (the last adoption; its drag the latest estimate), None
+        while the compensator flies the model it was given (the identifier forgets its bank at a
+        reset, the adopted model stays: its drag is then the one the compensator flies)."""
+        if self._target is None or self.adopted_at_s is None:
+            return None
+        drag = self.identifier.drag_1_s if self.identifier is not None else None
+        return IdentifiedModel(lag_s=self._target[0], delay_s=self._target[1], drag_1_s=self.drag[0] if drag is None else drag,
+                               adopted_at_s=self.adopted_at_s)  # fmt: skip
 
     def _extrapolate(self, time_s: float, position: Vec, velocity: Vec) -> tuple[Vec, Vec]:
         """Integrate the model from the measurement over the setpoints already sent (Smith) to

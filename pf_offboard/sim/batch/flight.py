@@ -194,11 +194,13 @@ def _wrap_pi(a: Arr) -> Arr:
     return np.where(r <= 0.0, r + 2.0 * math.pi, r) - math.pi
 
 
-def fly(tasks: Sequence[Any], trace: list[Arr] | None = None) -> tuple[dict[tuple[int, int], dict[str, Any]], list[Any]]:
+def fly(tasks: Sequence[Any], trace: list[Arr] | None = None,
+        followers: list[BatchFollower] | None = None) -> tuple[dict[tuple[int, int], dict[str, Any]], list[Any]]:  # fmt: skip
     """Fly tasks that share their settings and their config but for its gains, all at once.
 
     Returns (rows by task key, the tasks the scalar engine must fly: flights that left the
-    mirrored path). ``trace``: gets the true positions (3, N) NED after every step."""
+    mirrored path). ``trace``: gets the true positions (3, N) NED after every step; ``followers``:
+    the batch follower (its state after the flights)."""
     from pf_offboard.sweep.rows import finish_row
 
     setup = _Setup(tasks[0].config_yaml, tasks[0].settings)
@@ -237,6 +239,8 @@ def fly(tasks: Sequence[Any], trace: list[Arr] | None = None) -> tuple[dict[tupl
     qn = Q / np.sqrt(np.sum(Q * Q, axis=0))
     hold_yaw = np.array([math.atan2(2.0 * (a * d + b * c), 1.0 - 2.0 * (c * c + d * d)) for a, b, c, d in qn.T.tolist()])
     follower = BatchFollower(setup.follower, n, per_flight)
+    if followers is not None:
+        followers.append(follower)
     duration = s.duration_s
     max_steps = int(math.ceil(duration / dt)) + 1
     with np.errstate(all="ignore"):

@@ -17,8 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard.control import follower as F
-from pf_offboard.control.compensator import MAX_GAP_S
+from pf_offboard.control.compensator import ADAPT_DRAG_SLEW, ADAPT_SLEW, MAX_GAP_S
 from pf_offboard.control.types import GRAVITY_M_S2
+from pf_offboard.sim.batch.adaptive import BatchIdentifier
 from pf_offboard.sim.batch.geometry import BatchPath, atan2, power
 from pf_offboard.sim.batch.law import BatchLaw, LawOut, Terms, _where3, exact_terms
 from pf_offboard.sim.batch.projection import BatchProjector
@@ -182,6 +183,19 @@ class _Compensator:
         self.horizon_s, self.hold_s, self.lag, self.gain, self.drag = c.horizon_s, c.hold_s, c.lag, c.gain, c.drag
         self.observer_rad_s, self.max_disturbance_m_s2 = c.observer_rad_s, c.max_disturbance_m_s2
         self._history_s = c._history_s
+        # in-flight identification (the scalar's identifier): the lag, the dead time (the horizon)
+        # and the drag become per flight, the adopted model too (NaN: none, the scalar's None)
+        self.identifier = BatchIdentifier(c.identifier, n) if c.identifier is not None else None
+        if self.identifier is not None:
+            if c.holds:  # the identifier runs with the typical model only, whose groups share a delay
+                raise NotImplementedError("the batch engine identifies with equal horizontal and vertical delays only")
+            full = lambda x: np.full(n, float(x))  # noqa: E731
+            self.horizon_s = full(c.horizon_s)
+            self.lag = (full(c.lag[0]), full(c.lag[1]), c.lag[2])
+            self.drag = (full(c.drag[0]), full(c.drag[1]), c.drag[2])
+            target = c._target if c._target is not None else (math.nan, math.nan)
+            self._target = (full(target[0]), full(target[1]))
+            self.adopted_at_s = full(c.adopted_at_s if c.adopted_at_s is not None else math.nan)
         self.reset()
 
     def reset(self) -> None:
@@ -195,6 +209,8 @@ class _Compensator:
         self.speed_offset_m_s = z
         self.xi1_offset_m = z
         self.phi1_offset_m = z
+        if self.identifier is not None:
+            self.identifier.reset()
 
     def integral_offsets(self) -> tuple[Arr, Arr, Arr]:
         return self.speed_offset_m_s, self.xi1_offset_m, self.phi1_offset_m
@@ -228,22 +244,70 @@ class _Compensator:
         out.append((t1 - tau, cur))
         return out
 
-    def _advance(self, a_f: list[Arr], v: list[Arr], p: list[Arr], t0: float, t1: float) -> None:
-        for h, u_sp in self._pieces(t0, t1, self.horizon_s):
-            if h <= 0.0:
-                continue
-            for i in range(3):
-                u = self.gain[i] * (u_sp[i] if u_sp is not None else 0.0)
-                lag = self.lag[i]
+    def _advance(self, a_f: list[Arr], v: list[Arr], p: list[Arr], t0: float, t1: Any) -> None:
+        """``t1``: one time, or one per flight (``_extrapolate`` with a horizon per flight)."""
+        horizon = self.horizon_s
+        if np.ndim(horizon) == 0 or bool(np.all(horizon == horizon[0])):  # one horizon: shared pieces
+            h0 = float(horizon) if np.ndim(horizon) == 0 else float(horizon[0])
+            t1_ = float(t1) if np.ndim(t1) == 0 else float(t1[0])
+            for h, u_sp in self._pieces(t0, t1_, h0):
+                if h > 0.0:
+                    self._piece(a_f, v, p, h, u_sp, None)
+            return
+        # a horizon per flight (the identification moved some): the scalar's pieces per flight,
+        # the setpoint history walked once with masks (same breakpoints, same order per flight)
+        n = self.n
+        z = np.zeros(n)
+        cur: list[Arr] = [z, z, z]
+        tau = np.full(n, t0)
+        done = np.zeros(n, dtype=bool)
+        for ts, a in self._sent:
+            t_on = ts + horizon
+            before = ~done & (t_on <= t0 + 1e-9)
+            done = done | (~before & (t_on >= t1))
+            emit = ~before & ~done
+            if emit.any():
+                h = t_on - tau
+                self._piece(a_f, v, p, h, tuple(cur), emit & (h > 0.0))  # type: ignore[arg-type]
+                tau = np.where(emit, t_on, tau)
+            take = before | emit
+            if take.any():
+                cur = [np.where(take, a[i], cur[i]) for i in range(3)]
+            if done.all():
+                break
+        h = t1 - tau
+        self._piece(a_f, v, p, h, tuple(cur), h > 0.0)  # type: ignore[arg-type]
+
+    def _piece(self, a_f: list[Arr], v: list[Arr], p: list[Arr], h: Any, u_sp: V | None, rows: Any) -> None:
+        """One zero-order-hold piece of ``_advance`` (``h`` > 0 s; ``rows``: the flights it applies
+        to, with ``h`` per flight; None: every flight, one ``h``)."""
+        if rows is not None:
+            if not rows.any():
+                return
+            h = np.where(rows, h, 1.0)
+        for i in range(3):
+            u = self.gain[i] * (u_sp[i] if u_sp is not None else 0.0)
+            lag = self.lag[i]
+            if np.ndim(lag) == 0 and np.ndim(h) == 0:
                 if lag > 0.0:
                     alpha = math.exp(-h / lag)
                     mean_a = u + (a_f[i] - u) * (lag / h) * (1.0 - alpha)
-                    a_f[i] = u + (a_f[i] - u) * alpha
+                    a_new = u + (a_f[i] - u) * alpha
                 else:
-                    mean_a = a_f[i] = u + 0.0 * a_f[i]
-                acc = mean_a - self.drag[i] * v[i] + self.disturbance[i]
-                p[i] = p[i] + h * (v[i] + 0.5 * h * acc)
-                v[i] = v[i] + h * acc
+                    mean_a = a_new = u + 0.0 * a_f[i]
+            else:
+                pos = np.asarray(lag) > 0.0
+                lag_ = np.where(pos, lag, 1.0)
+                alpha = np.exp(-h / lag_)
+                mean_a = np.where(pos, u + (a_f[i] - u) * (lag_ / h) * (1.0 - alpha), u + 0.0 * a_f[i])
+                a_new = np.where(pos, u + (a_f[i] - u) * alpha, u + 0.0 * a_f[i])
+            acc = mean_a - self.drag[i] * v[i] + self.disturbance[i]
+            p_new = p[i] + h * (v[i] + 0.5 * h * acc)
+            v_new = v[i] + h * acc
+            if rows is None:
+                a_f[i], p[i], v[i] = a_new, p_new, v_new
+            else:
+                a_f[i], p[i], v[i] = np.where(rows, a_new, a_f[i]), np.where(rows, p_new, p[i]), np.where(rows, v_new, v[i])
 
     def predict(self, time_s: float, position: V, velocity: V) -> tuple[V, V]:
         t_prev = self._t
@@ -270,10 +334,50 @@ class _Compensator:
         self._v_hat = (vh[0], vh[1], vh[2])
         self.disturbance = (dh[0], dh[1], dh[2])
         self._t = time_s
+        if self.identifier is not None:
+            self._adapt(t_prev, time_s, velocity)
         return self._extrapolate(time_s, position, velocity)
 
+    def _adapt(self, t_prev: float, time_s: float, velocity: V) -> None:
+        """``InnerLoopCompensator._adapt`` per flight."""
+        assert self.identifier is not None
+        found = self.identifier.update(time_s, velocity, self._pieces)  # type: ignore[arg-type]
+        if found is not None:
+            adopt, lag, delay = found
+            self._target = (np.where(adopt, lag, self._target[0]), np.where(adopt, delay, self._target[1]))
+            self.adopted_at_s = np.where(adopt, time_s, self.adopted_at_s)
+        rows = ~np.isnan(self._target[0])
+        if rows.any():
+            self._move_to_target(time_s - t_prev, rows, self._target, self.identifier.drag_1_s)
+
+    def _move_to_target(self, dt: float, rows: Mask, target: tuple[Arr, Arr], drag: Arr) -> None:
+        """``InnerLoopCompensator._move_to_target`` for the flights ``rows`` (drag NaN: none)."""
+        step = ADAPT_SLEW * dt
+        lag, delay = target
+        cur_lag, cur_delay = self.lag[0], self.horizon_s
+        new_lag = cur_lag + np.maximum(-step, np.minimum(step, lag - cur_lag))
+        new_delay = cur_delay + np.maximum(-step, np.minimum(step, delay - cur_delay))
+        new_lag = np.where(rows, new_lag, cur_lag)
+        self.lag = (new_lag, new_lag, self.lag[2])
+        has = rows & ~np.isnan(drag)
+        cur, drag_step = self.drag[0], ADAPT_DRAG_SLEW * dt
+        new_drag = np.where(has, cur + np.maximum(-drag_step, np.minimum(drag_step, drag - cur)), cur)
+        self.drag = (new_drag, new_drag, self.drag[2])
+        self.horizon_s = np.where(rows, new_delay, cur_delay)  # delay_s = delay_z_s = horizon_s, no hold (equal already)
+
+    def identified(self) -> dict[str, Arr] | None:
+        """``InnerLoopCompensator.identified`` per flight (NaN where nothing was adopted)."""
+        if self.identifier is None:
+            return None
+        none = np.isnan(self.adopted_at_s)
+        drag = self.identifier.drag_1_s
+        drag = np.where(np.isnan(drag), self.drag[0], drag)
+        nan = math.nan
+        return {"lag_s": np.where(none, nan, self._target[0]), "delay_s": np.where(none, nan, self._target[1]),
+                "drag_1_s": np.where(none, nan, drag), "adopted_at_s": self.adopted_at_s}  # fmt: skip
+
     def _extrapolate(self, time_s: float, position: V, velocity: V) -> tuple[V, V]:
-        if self.horizon_s <= 0.0:
+        if np.all(self.horizon_s <= 0.0):
             return position, velocity
         a_f, v, p = list(self._a_f), list(velocity), list(position)
         self._advance(a_f, v, p, time_s, time_s + self.horizon_s)

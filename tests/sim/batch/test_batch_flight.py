@@ -1,6 +1,9 @@
 """Whole sweep flights on the batch engine against the scalar ``sim`` flight (SimFlight), at run
 time: the true trajectory of every flight agrees to 1e-6 m over 10 s thrown flights in wind, on both
-realistic presets in the three output modes, and every row of the table is identical."""
+realistic presets in the three output modes, and every row of the table is identical. The same
+with the inner loop identified in flight (a config without a ``vehicle:`` section, as the defaults
+fly), including flights that adopt a shorter dead time (the ``fast`` preset) and ones that keep
+the typical model."""
 
 from __future__ import annotations
 
@@ -10,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from pf_offboard.sim.batch.flight import fly, plan_chunks, supported
 from pf_offboard.sim.flight import SimFlight
@@ -21,8 +25,9 @@ from ..helpers import PX4_SIH, ROOT
 PAPER = ROOT / "configs" / "paper.yaml"
 
 
-def _scalar_trajectory(task) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """The true positions (NED) after every step of the scalar flight of ``task``."""
+def _scalar_trajectory(task, followers: list | None = None) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The true positions (NED) after every step of the scalar flight of ``task`` (``followers``:
+    gets its PathFollower)."""
     with tempfile.TemporaryDirectory() as tmp:
         cfg = Path(tmp) / "config.yaml"
         cfg.write_text(task.config_yaml, encoding="utf-8")
@@ -38,6 +43,8 @@ def _scalar_trajectory(task) -> np.ndarray:  # type: ignore[no-untyped-def]
 
         flight.autopilot.step = recorded  # type: ignore[method-assign]
         flight.run()
+        if followers is not None:
+            followers.append(flight.pipeline.follower)
     return np.array(out)
 
 
@@ -59,6 +66,48 @@ def test_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(vehicle: 
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (vehicle, k, worst)
         assert rows_equal([rows[task.key]], [run_flight(task)])
+
+
+def _identifying_config(tmp: Path) -> Path:
+    """px4-sih.yaml's path and speed without its identified vehicle: the typical model, identified
+    in flight (``compensation.identify_online``)."""
+    data = yaml.safe_load(PX4_SIH.read_text(encoding="utf-8"))
+    data.pop("vehicle")
+    data["compensation"] = {"identify_online": True}
+    out = tmp / "identify.yaml"
+    out.write_text(yaml.safe_dump(data), encoding="utf-8")
+    return out
+
+
+@pytest.mark.parametrize(("vehicle", "output", "flights", "adopts"), [
+    ("fast", None, 2, True), ("fast", "attitude", 1, True), ("px4-sih", None, 1, False), ("arducopter", "rates", 1, False),
+    ("px4-sih", "attitude", 1, False), ("arducopter", None, 1, False),
+])  # fmt: skip
+def test_flights_that_identify_the_inner_loop_follow_the_scalar_ones(tmp_path: Path, vehicle: str, output: str | None,
+                                                                     flights: int, adopts: bool) -> None:  # fmt: skip
+    settings = FlightSettings(vehicle=vehicle, duration_s=10.0, settle_s=3.0, output_mode=output)
+    tasks = plan.tasks(_identifying_config(tmp_path), plan.SweepSpec(flights=flights, seed=3, settings=settings))
+    assert all(supported(t) is None for t in tasks)
+    assert max(np.hypot(*t.start.wind_enu_m_s[:2]) for t in tasks) > 0.3  # in wind
+    trace: list[np.ndarray] = []
+    followers: list = []
+    rows, redo = fly(tasks, trace, followers)
+    assert not redo
+    batch = np.array(trace)
+    found = followers[0].compensator.identified()
+    for k, task in enumerate(tasks):
+        scalar_followers: list = []
+        scalar = _scalar_trajectory(task, scalar_followers)
+        assert len(scalar) == 1000
+        worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
+        assert worst <= 1e-6, (vehicle, k, worst)
+        assert rows_equal([rows[task.key]], [run_flight(task)])
+        model = scalar_followers[0].compensator.identified
+        assert (model is not None) == adopts == (not np.isnan(found["adopted_at_s"][k]))
+        if model is not None:  # the fast preset answers at once: a shorter dead time, the same one in both
+            assert model.delay_s < 0.1
+            for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s"):
+                assert abs(getattr(model, key) - float(found[key][k])) <= 1e-9, key
 
 
 def test_the_engines_give_the_same_table_for_a_gain_sweep_and_unmirrored_flights() -> None:

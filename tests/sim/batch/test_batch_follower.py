@@ -9,6 +9,7 @@ allocation, open paths past both ends and the self-intersecting px4-sih loop.
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -66,3 +67,41 @@ def test_every_output_equals_the_scalar_follower(name: str) -> None:
         vel = vel + dt * cb.acceleration + rng.normal(0.0, 0.05, vel.shape)
     assert max(worst.values()) <= 1e-9, worst
     assert saturated > 0 and approach > 0  # the limits and the approach law were exercised
+
+
+def test_identifying_followers_equal_the_scalar_ones_adoption_by_adoption() -> None:
+    """``compensation.identify_online`` (the typical model): on these random states some flights
+    adopt a shorter dead time at different instants and some keep the model, so the batch
+    compensator predicts over a horizon per flight. Outputs and the identified models agree."""
+    cfg = load_config(CONFIGS / "figure8.yaml")
+    cfg = dataclasses.replace(cfg, compensation=dataclasses.replace(cfg.compensation, identify_online=True))
+    n, steps, dt = 16, 500, 0.01
+    rng = np.random.default_rng(11)
+    proto = PathFollower.from_config(cfg)
+    assert proto.compensator is not None and proto.compensator.identifier is not None
+    scalar = [copy.deepcopy(proto) for _ in range(n)]
+    batch = BatchFollower(copy.deepcopy(proto), n)
+    pos, vel = _states(scalar[0].path, n, rng)
+    worst = 0.0
+    horizons = set()
+    for k in range(steps):
+        t = dt * k
+        cb = batch.update(pos, vel, t)
+        for i, f in enumerate(scalar):
+            c = f.update(pos[i], vel[i], t)
+            for a, b in ((c.acceleration, cb.acceleration[i]), (c.attitude, cb.attitude[i]), (c.state[:2], (cb.eta1[i], cb.eta2[i]))):
+                worst = max(worst, float(np.max(np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float)))))
+        horizons.add(len(set(np.atleast_1d(batch.compensator.horizon_s).tolist())))  # type: ignore[union-attr]
+        pos = pos + dt * vel
+        vel = vel + dt * cb.acceleration + rng.normal(0.0, 0.05, vel.shape)
+    assert worst <= 1e-9, worst
+    assert max(horizons) >= 3  # flights predicted over different horizons at once
+    found = batch.compensator.identified()  # type: ignore[union-attr]
+    models = [f.compensator.identified for f in scalar]
+    assert 0 < sum(m is not None for m in models) < n
+    for i, m in enumerate(models):
+        if m is None:
+            assert np.isnan(found["adopted_at_s"][i])
+        else:
+            for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s"):
+                assert abs(getattr(m, key) - float(found[key][i])) <= 1e-9, (i, key)
