@@ -159,8 +159,9 @@ def test_defaults_follow_in_still_air(mode):
     t, p = fly(path, 1.5, mode, 22.0)
     ct, spd, mean = measure(path, t, p, 1.5, 8.0)
     print(f"{mode} still air: cross-track RMS {100 * ct:.2f} cm, speed error RMS {100 * spd:.2f} cm/s, mean {100 * mean:+.2f}")
-    # measured: acceleration 1.36 cm, 1.2 cm/s (0.26 cm with Compensation(identify_online=True): the
-    # typical model's 0.1 s dead time against this simulator's ~0.03 s); rates 0.96 cm, 1.8 cm/s
+    # measured: acceleration 0.26 cm, 0.85 cm/s (the dead time identified in flight, on by default;
+    # 1.36 cm with identify_online=False: the typical model's 0.1 s against this simulator's ~0.03 s);
+    # rates 0.96 cm, 1.8 cm/s
     assert ct <= 0.02 and spd <= 0.025
 
 
@@ -170,7 +171,7 @@ def test_defaults_follow_in_a_3_m_s_wind(mode):
     t, p = fly(path, 1.5, mode, 25.0, wind=(3.0, 0.0, 0.0))
     ct, spd, mean = measure(path, t, p, 1.5, 10.0)
     print(f"{mode} 3 m/s wind: cross-track RMS {100 * ct:.2f} cm, speed error RMS {100 * spd:.2f} cm/s, mean {100 * mean:+.2f}")
-    # measured: acceleration 1.45 cm, mean +0.9 cm/s (0.49 cm, -0.3 with identify_online);
+    # measured: acceleration 0.49 cm, mean -0.3 cm/s (1.45 cm, +0.9 with identify_online=False);
     # rates 1.0 cm, +0.2 cm/s (the paper's law: -47 cm/s)
     assert ct <= 0.02 and abs(mean) <= 0.02
 
