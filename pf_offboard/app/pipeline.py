@@ -22,6 +22,7 @@ import numpy as np
 from pf_offboard.app.encoders import Encoded, Encoder
 from pf_offboard.app.estimator import Estimator, StateEstimate
 from pf_offboard.logs.steplog import StepRecord
+from pf_offboard.logs.summary import identified_event
 
 _NAN3 = (math.nan, math.nan, math.nan)
 _NAN4 = (math.nan, math.nan, math.nan, math.nan)
@@ -64,6 +65,7 @@ class Pipeline:
         # a follower with inner-loop compensation needs each sample's time (observer, predictor)
         self._timed = getattr(follower, "compensator", None) is not None or bool(getattr(follower, "needs_time", False))
         self._was_active = False
+        self._identified: Any = None  # the last adopted inner-loop model logged
         speed = getattr(follower, "speed", math.nan)
         self.speed_ref_m_s = float(speed) if isinstance(speed, (int, float)) else math.nan
         # with a speed profile the reference varies along the path: log each step's eta2_ref
@@ -115,6 +117,10 @@ class Pipeline:
             encoded = self.encoder.hold(est, stamp, f"controller failed: {exc}")
         else:
             encoded = self.encoder.encode(cmd, est, stamp)
+        model = getattr(getattr(self.follower, "compensator", None), "identified", None)
+        if model is not None and model is not self._identified:  # an adoption: logged once, for the summary and replay
+            self._identified = model
+            events.append(identified_event(model.lag_s, model.delay_s, model.drag_1_s))
         if encoded.replaced:
             self.replaced_steps += 1
             events.append(f"hold: {encoded.replaced}")

@@ -37,7 +37,8 @@ SWITCH_RATIO = 0.6  # a candidate replaces the active one when its score is belo
 @dataclass(frozen=True)
 class IdentifiedModel:
     """What the identifier adopted in flight: the horizontal response's first-order lag and dead
-    time, its linear drag (the latest estimate) and when it was adopted (the controller's clock)."""
+    time, its linear drag then (the compensator keeps following the estimate) and when (the
+    controller's clock, s)."""
 
     lag_s: float
     delay_s: float

@@ -97,7 +97,8 @@ class InnerLoopCompensator:
             model.accel_gain_xy, delays_s=[d for d in DELAYS_S if d <= self.delay_s], lags_s=(model.accel_lag_xy_s,),
             initial=(model.accel_lag_xy_s, self.delay_s)) if adapt else None  # fmt: skip
         self._target: tuple[float, float] | None = None
-        self.adopted_at_s: float | None = None  # the time of the last adoption
+        # what the identifier adopted last (its drag then; None: the model flown is the given one)
+        self.identified: IdentifiedModel | None = None
         longest = max(self.horizon_s, self.identifier.max_delay_s) if self.identifier is not None else self.horizon_s
         self._history_s = longest + MAX_GAP_S
         for name, value in (("speed_integral_rad_s", speed_integral_rad_s), ("offset_integral_rad_s", offset_integral_rad_s),
@@ -220,7 +221,7 @@ class InnerLoopCompensator:
         best = self.identifier.update(time_s, velocity, self._pieces)
         if best is not None:
             self._target = best
-            self.adopted_at_s = time_s
+            self.identified = IdentifiedModel(best[0], best[1], self.identifier.drag_1_s or 0.0, time_s)
         if self._target is None:
             return
         self._move_to_target(time_s - t_prev, self._target, self.identifier.drag_1_s)
@@ -242,17 +243,6 @@ class InnerLoopCompensator:
             self.drag = (new_drag, new_drag, self.drag[2])
         self.delay_s = self.delay_z_s = self.horizon_s = new_delay
         self.hold_s = (0.0, 0.0, 0.0)
-
-    @property
-    def identified(self) -> IdentifiedModel | None:
-        """The model the identifier adopted (the last adoption; its drag the latest estimate), None
-        while the compensator flies the model it was given (the identifier forgets its bank at a
-        reset, the adopted model stays: its drag is then the one the compensator flies)."""
-        if self._target is None or self.adopted_at_s is None:
-            return None
-        drag = self.identifier.drag_1_s if self.identifier is not None else None
-        return IdentifiedModel(lag_s=self._target[0], delay_s=self._target[1], drag_1_s=self.drag[0] if drag is None else drag,
-                               adopted_at_s=self.adopted_at_s)  # fmt: skip
 
     def _extrapolate(self, time_s: float, position: Vec, velocity: Vec) -> tuple[Vec, Vec]:
         """Integrate the model from the measurement over the setpoints already sent (Smith) to

@@ -15,7 +15,9 @@ The measures are :mod:`pf_offboard.logs.measures`' (one definition for every com
 - mode changes: (time, from, to) whenever the ``mode`` column changes, and logged events;
 - on a closed path, the time of each whole lap from activation and, beside it, the point-mass
   lower bound of a lap at the vehicle's limits (:class:`pf_offboard.logs.measures.LapTimer`;
-  :meth:`pf_offboard.control.PathFollower.lap_time_bound_s`).
+  :meth:`pf_offboard.control.PathFollower.lap_time_bound_s`);
+- the inner-loop model identified in flight (``compensation.identify_online``): the last
+  ``identified: ...`` event of the step log (:func:`identified_event`), None when none was adopted.
 
 Without the path (``tangent=None``) the position-derived speed is not available (n/a).
 """
@@ -47,6 +49,26 @@ from pf_offboard.logs.measures import (
 )
 from pf_offboard.logs.steplog import StepRecord
 
+IDENTIFIED_PREFIX = "identified: "
+_IDENTIFIED_KEYS = ("lag_s", "delay_s", "drag_1_s")
+
+
+def identified_event(lag_s: float, delay_s: float, drag_1_s: float) -> str:
+    """The step log's event for an adopted inner-loop model (floats as ``repr``: read back exactly)."""
+    return IDENTIFIED_PREFIX + " ".join(f"{k}={float(v)!r}" for k, v in zip(_IDENTIFIED_KEYS, (lag_s, delay_s, drag_1_s)))
+
+
+def parse_identified(event: str) -> dict[str, float] | None:
+    """The model an ``identified: ...`` event names (None when the event is another one)."""
+    if not event.startswith(IDENTIFIED_PREFIX):
+        return None
+    try:
+        values = dict(item.split("=", 1) for item in event[len(IDENTIFIED_PREFIX):].split())
+        return {k: float(values[k]) for k in _IDENTIFIED_KEYS}
+    except (KeyError, ValueError):
+        return None
+
+
 SAT_FLAGS = ("sat_tangential", "sat_transversal", "sat_tilt", "sat_thrust", "sat_approach_speed")
 
 
@@ -66,6 +88,9 @@ class FlightSummary:
     # the point-mass lower bound of one lap at the vehicle's limits (s; None when not given)
     lap_times_s: tuple[float, ...] = ()
     lap_time_bound_s: float | None = None
+    # the inner-loop model adopted in flight, the last one (lag_s, delay_s, drag_1_s, adopted_at_s:
+    # vehicle time); None when the flight kept the model it was given
+    identified_model: dict[str, float] | None = None
 
     # shorthands (window in the name)
     @property
@@ -100,6 +125,7 @@ class FlightSummary:
             "events": [{"time_s": t, "event": e} for t, e in self.events],
             "lap_times_s": list(self.lap_times_s),
             "lap_time_bound_s": self.lap_time_bound_s,
+            "identified_model": None if self.identified_model is None else dict(self.identified_model),
         }
 
     def lines(self) -> list[str]:
@@ -120,6 +146,12 @@ class FlightSummary:
             laps = ", ".join(f"{x:.2f}" for x in self.lap_times_s) or "none completed"
             bound = "" if self.lap_time_bound_s is None else f"; point-mass bound at the vehicle's limits {self.lap_time_bound_s:.2f} s"
             out.append(f"lap times           {laps} s (from activation; the first includes the approach){bound}")
+        m = self.identified_model
+        if m is None:
+            out.append("identified model    none adopted (the configured or typical inner-loop model was flown)")
+        else:
+            out.append(f"identified model    lag {m['lag_s']:.3f} s, dead time {m['delay_s']:.3f} s, drag {m['drag_1_s']:.3f} 1/s "
+                       f"(adopted at t={m['adopted_at_s']:.3f} s)")  # fmt: skip
         for t, a, b in self.mode_changes:
             out.append(f"mode change         t={t:.3f} s: {a or '-'} -> {b}")
         for t, e in self.events:
@@ -155,6 +187,7 @@ class SummaryAccumulator:
         self._mode = ""
         self._events: list[tuple[float, str]] = []
         self.events_dropped = 0
+        self._identified: dict[str, float] | None = None
         self._t_act: float | None = None
         self._conv = Convergence()
         self._settled = WindowSums(settled_window(settle_s), settle_s)
@@ -184,6 +217,10 @@ class SummaryAccumulator:
             self._modes.append((t, self._mode, r.mode))
             self._mode = r.mode
         if r.event:
+            for part in r.event.split(";"):
+                model = parse_identified(part)
+                if model is not None:
+                    self._identified = {**model, "adopted_at_s": t}
             if len(self._events) < MAX_EVENTS:
                 self._events.append((t, r.event))
             else:
@@ -269,7 +306,8 @@ class SummaryAccumulator:
         duration = float(self._t_last - self._t_first)
         saturation = dict(self._saturation)
         if self._t_act is None:
-            return FlightSummary(duration, self.steps, 0, None, None, None, None, saturation, tuple(self._modes), events)
+            return FlightSummary(duration, self.steps, 0, None, None, None, None, saturation, tuple(self._modes), events,
+                                 identified_model=self._identified)  # fmt: skip
         settled, whole = self._settled.copy(), self._whole.copy()
         self._drain(final=True, settled=settled, whole=whole)  # the last 0.1 s: no derivative
         conv = self._conv.time_s
@@ -286,6 +324,7 @@ class SummaryAccumulator:
             events=events,
             lap_times_s=tuple(self._laps.laps_s) if self._laps is not None else (),
             lap_time_bound_s=self.lap_time_bound_s,
+            identified_model=self._identified,
         )
 
 

@@ -129,3 +129,24 @@ def test_no_lap_times_without_a_closed_path() -> None:
     s = summarize(recs)
     assert s.lap_times_s == () and s.lap_time_bound_s is None
     assert not any(x.startswith("lap times") for x in s.lines())
+
+
+def test_the_last_identified_model_is_the_summarys() -> None:
+    """``identified: ...`` events (the pipeline logs one per adoption of an inner-loop model, among
+    other events of the step): the summary reports the last one and when; none: null."""
+    from pf_offboard.logs.summary import identified_event, parse_identified
+
+    first = identified_event(0.1, 0.04, 0.25)
+    assert parse_identified(first) == {"lag_s": 0.1, "delay_s": 0.04, "drag_1_s": 0.25}
+    assert parse_identified("identified: lag_s=x") is None and parse_identified("activated") is None
+    recs = [record(0.02 * k, 0.01, -1.5) for k in range(400)]
+    plain = summarize(recs)
+    assert plain.identified_model is None and plain.to_dict()["identified_model"] is None
+    assert any(line.startswith("identified model") and "none adopted" in line for line in plain.lines())
+    recs[150] = dataclasses.replace(recs[150], event=first)
+    recs[250] = dataclasses.replace(recs[250], event="hold: x;" + identified_event(0.1, 0.0, 0.3125))
+    s = summarize(recs)
+    assert s.identified_model == {"lag_s": 0.1, "delay_s": 0.0, "drag_1_s": 0.3125, "adopted_at_s": recs[250].time_s}
+    assert s.to_dict()["identified_model"] == s.identified_model
+    line = next(x for x in s.lines() if x.startswith("identified model"))
+    assert "dead time 0.000 s" in line and "drag 0.312 1/s" in line and f"t={recs[250].time_s:.3f} s" in line

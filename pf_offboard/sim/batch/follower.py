@@ -195,7 +195,9 @@ class _Compensator:
             self.drag = (full(c.drag[0]), full(c.drag[1]), c.drag[2])
             target = c._target if c._target is not None else (math.nan, math.nan)
             self._target = (full(target[0]), full(target[1]))
-            self.adopted_at_s = full(c.adopted_at_s if c.adopted_at_s is not None else math.nan)
+            m = c.identified
+            known = (math.nan,) * 4 if m is None else (m.lag_s, m.delay_s, m.drag_1_s, m.adopted_at_s)
+            self._identified = tuple(full(x) for x in known)  # what was adopted last, per flight
         self.reset()
 
     def reset(self) -> None:
@@ -345,7 +347,9 @@ class _Compensator:
         if found is not None:
             adopt, lag, delay = found
             self._target = (np.where(adopt, lag, self._target[0]), np.where(adopt, delay, self._target[1]))
-            self.adopted_at_s = np.where(adopt, time_s, self.adopted_at_s)
+            if adopt.any():
+                new = (lag, delay, self.identifier.drag_1_s, np.full(self.n, time_s))
+                self._identified = tuple(np.where(adopt, x, old) for x, old in zip(new, self._identified))
         rows = ~np.isnan(self._target[0])
         if rows.any():
             self._move_to_target(time_s - t_prev, rows, self._target, self.identifier.drag_1_s)
@@ -369,12 +373,7 @@ class _Compensator:
         """``InnerLoopCompensator.identified`` per flight (NaN where nothing was adopted)."""
         if self.identifier is None:
             return None
-        none = np.isnan(self.adopted_at_s)
-        drag = self.identifier.drag_1_s
-        drag = np.where(np.isnan(drag), self.drag[0], drag)
-        nan = math.nan
-        return {"lag_s": np.where(none, nan, self._target[0]), "delay_s": np.where(none, nan, self._target[1]),
-                "drag_1_s": np.where(none, nan, drag), "adopted_at_s": self.adopted_at_s}  # fmt: skip
+        return dict(zip(("lag_s", "delay_s", "drag_1_s", "adopted_at_s"), self._identified))
 
     def _extrapolate(self, time_s: float, position: V, velocity: V) -> tuple[V, V]:
         if np.all(self.horizon_s <= 0.0):
