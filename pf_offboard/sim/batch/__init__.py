@@ -10,7 +10,10 @@ the one that flies:
 - :mod:`.projection` — :class:`BatchProjector` (``pf_offboard.path.projection.Projector``);
 - :mod:`.law` — exact transverse terms, the thrust set and the control law
   (``pf_offboard.control.transverse`` / ``feasible`` / ``law``);
-- :mod:`.follower` — :class:`BatchFollower` (``pf_offboard.control.follower.PathFollower``);
+- :mod:`.follower` — :class:`BatchFollower` (``pf_offboard.control.follower.PathFollower``, its
+  inner-loop compensator);
+- :mod:`.adaptive` — :class:`~.adaptive.BatchIdentifier` (``pf_offboard.control.adaptive.ResponseIdentifier``:
+  the inner loop identified in flight, each flight adopting on its own);
 - :mod:`.dynamics` — :class:`BatchSimulator` (``sitl_mock.dynamics.Simulator``);
 - :mod:`.flight` — sweep flights (``pf_offboard.sim.flight.SimFlight`` with the mock autopilot's
   PX4 handling, the app's estimator and encoder, the sweep's judge) → the scalar engine's rows.
