@@ -416,6 +416,23 @@ def _lap_times(spec: dict[str, Any]) -> str:
     return f"lap times {', '.join(f'{x:.2f}' for x in laps)} s (the first from activation); point-mass bound {bound:.2f} s"
 
 
+def _identified(spec: dict[str, Any]) -> str:
+    """The inner-loop model the app adopted in flight, from the summary.json fly wrote ("" when the
+    app wrote none: an older checkout)."""
+    try:
+        summary = json.loads((Path(spec["workdir"]) / "log" / "summary.json").read_text()).get("summary") or {}
+    except (OSError, ValueError, KeyError):
+        return ""
+    if "identified_model" not in summary:
+        return ""
+    m = summary["identified_model"]
+    if m is None:
+        return "identified: none adopted"
+    after = m["adopted_at_s"] - (summary.get("activation_time_s") or math.nan)
+    return (f"identified: lag {m['lag_s']:.3f} s, dead time {m['delay_s']:.3f} s, drag {m['drag_1_s']:.3f} 1/s, "
+            f"adopted {after:.1f} s after activation")  # fmt: skip
+
+
 def row(result: dict[str, Any]) -> str:
     spec = result["spec"]
     tr = result.get("tracking") or {}
@@ -429,9 +446,9 @@ def row(result: dict[str, Any]) -> str:
     if result.get("past_the_end"):
         pe = result["past_the_end"]
         line += f"\n{'':38s}(window ends at the open path's end; after it: overshoot {cm(pe['overshoot_m'])} cm, cross-track max {cm(pe['cross_track_max_m'])} cm over {pe['duration_s']:.1f} s)"
-    laps = _lap_times(spec)
-    if laps:
-        line += f"\n{'':38s}{laps}"
+    for extra in (_lap_times(spec), _identified(spec)):
+        if extra:
+            line += f"\n{'':38s}{extra}"
     t = result.get("truth")
     if t and "error" not in t:
         w = t.get("truth") or {}
