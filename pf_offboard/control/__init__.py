@@ -8,6 +8,7 @@ from pf_offboard.control.attitude import (
     DEFAULT_ATTITUDE_TIME_CONSTANT_S,
     AttitudeRateLaw,
     AttitudeRates,
+    AttitudeTracker,
 )
 from pf_offboard.control.follower import PathFollower, evaluate_terms
 from pf_offboard.control.select import controller_from_config
@@ -29,6 +30,7 @@ __all__ = [
     "DEFAULT_ATTITUDE_TIME_CONSTANT_S",
     "AttitudeRateLaw",
     "AttitudeRates",
+    "AttitudeTracker",
     "GRAVITY_M_S2",
     "Command",
     "Compensation",
