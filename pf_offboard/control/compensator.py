@@ -46,6 +46,12 @@ _ZERO: Vec = (0.0, 0.0, 0.0)
 # A telemetry gap longer than this (s) makes the observer and predictor start over: integrating the
 # model across it would extrapolate commands the vehicle may not have flown.
 MAX_GAP_S = 0.25
+# The offset integrators run only this close to the path (m, cross-track): they are meant for the
+# steady offsets of a long turn (a few cm). Integrating the approach from metres away (inside the
+# exact tube, nothing saturated) wound them up to their bound, and the vehicle then overshot the
+# path by ~10 cm and crept back at the integral's 1 rad/s: on the px4-sih mock's fast off-path
+# starts that bump alone kept the cross-track above 10 cm for 0.5-1 s after arriving.
+OFFSET_INTEGRAL_BAND_M = 0.2
 # How fast the identified lag and dead time may move the model (s per s of flight).
 ADAPT_SLEW = 0.1
 ADAPT_DRAG_SLEW = 0.5  # 1/s per s
@@ -143,8 +149,9 @@ class InnerLoopCompensator:
         ks, kx = self.speed_integral_rad_s * dt, self.offset_integral_rad_s * dt
         vmax, pmax = self.max_speed_offset_m_s, self.max_position_offset_m
         self.speed_offset_m_s = min(vmax, max(-vmax, self.speed_offset_m_s + ks * speed_error_m_s))
-        self.xi1_offset_m = min(pmax, max(-pmax, self.xi1_offset_m + kx * xi1_m))
-        self.phi1_offset_m = min(pmax, max(-pmax, self.phi1_offset_m + kx * phi1_m))
+        if xi1_m * xi1_m + phi1_m * phi1_m <= OFFSET_INTEGRAL_BAND_M * OFFSET_INTEGRAL_BAND_M:
+            self.xi1_offset_m = min(pmax, max(-pmax, self.xi1_offset_m + kx * xi1_m))
+            self.phi1_offset_m = min(pmax, max(-pmax, self.phi1_offset_m + kx * phi1_m))
 
     def _pieces(self, t0: float, t1: float, delay: float) -> list[tuple[float, Vec]]:
         """Setpoints acting on the vehicle over (t0, t1] as (duration_s, a_sp ENU) pieces: the one

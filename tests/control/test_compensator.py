@@ -382,3 +382,25 @@ def test_reported_speed_stays_finite_far_from_the_path(paper_path) -> None:
         worst = max(worst, abs(cmd.state.eta2))
     # inside the tube the exact eta2 = v_t / (1 - kappa xi1) is at most 10 |v| (tube bound 0.9)
     assert worst <= 10.0 * 1.5
+
+
+def test_offset_integrators_run_only_near_the_path() -> None:
+    """The offset integrators wait until the vehicle is within OFFSET_INTEGRAL_BAND_M of the path:
+    an approach from metres away must not wind them up (it did, to their 0.1 m bound, and the
+    vehicle then overshot the path by that much); the speed integrator is not gated."""
+    from pf_offboard.control.compensator import OFFSET_INTEGRAL_BAND_M
+
+    comp = InnerLoopCompensator(MODEL)
+    for k in range(200):  # 2 s approaching from 0.5-1 m off: frozen
+        comp.integrate(k * DT_CTRL_S, 0.1, 1.0 - 0.0025 * k, 0.0, True)
+    speed, xi, phi = comp.integral_offsets()
+    assert (xi, phi) == (0.0, 0.0) and speed == pytest.approx(0.2, rel=0.02)
+    comp.reset()
+    near = 0.9 * OFFSET_INTEGRAL_BAND_M
+    for k in range(101):  # 1 s at 0.9 band off: integrates at offset_integral_rad_s (1 rad/s)
+        comp.integrate(k * DT_CTRL_S, 0.0, 0.0, -0.05, True)
+    assert comp.integral_offsets()[2] == pytest.approx(-0.05, rel=0.02)
+    comp.reset()
+    for k in range(51):
+        comp.integrate(k * DT_CTRL_S, 0.0, near * 0.6, near * 0.8, True)  # |e| = 0.9 band: inside
+    assert comp.integral_offsets()[1] == pytest.approx(0.27 * OFFSET_INTEGRAL_BAND_M, rel=0.02)

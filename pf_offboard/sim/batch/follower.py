@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard.control import follower as F
-from pf_offboard.control.compensator import ADAPT_DRAG_SLEW, ADAPT_SLEW, MAX_GAP_S
+from pf_offboard.control.compensator import ADAPT_DRAG_SLEW, ADAPT_SLEW, MAX_GAP_S, OFFSET_INTEGRAL_BAND_M
 from pf_offboard.control.types import GRAVITY_M_S2
 from pf_offboard.sim.batch.adaptive import BatchIdentifier
 from pf_offboard.sim.batch.geometry import BatchPath, atan2, power
@@ -226,8 +226,9 @@ class _Compensator:
         ks, kx = c.speed_integral_rad_s * dt, c.offset_integral_rad_s * dt
         vmax, pmax = c.max_speed_offset_m_s, c.max_position_offset_m
         self.speed_offset_m_s = np.where(free, np.minimum(vmax, np.maximum(-vmax, self.speed_offset_m_s + ks * speed_error)), self.speed_offset_m_s)
-        self.xi1_offset_m = np.where(free, np.minimum(pmax, np.maximum(-pmax, self.xi1_offset_m + kx * xi1)), self.xi1_offset_m)
-        self.phi1_offset_m = np.where(free, np.minimum(pmax, np.maximum(-pmax, self.phi1_offset_m + kx * phi1)), self.phi1_offset_m)
+        near = free & (xi1 * xi1 + phi1 * phi1 <= OFFSET_INTEGRAL_BAND_M * OFFSET_INTEGRAL_BAND_M)
+        self.xi1_offset_m = np.where(near, np.minimum(pmax, np.maximum(-pmax, self.xi1_offset_m + kx * xi1)), self.xi1_offset_m)
+        self.phi1_offset_m = np.where(near, np.minimum(pmax, np.maximum(-pmax, self.phi1_offset_m + kx * phi1)), self.phi1_offset_m)
 
     def _pieces(self, t0: float, t1: float, delay: float) -> list[tuple[float, V | None]]:
         z = None
