@@ -16,7 +16,9 @@ the one that flies:
   the inner loop identified in flight, each flight adopting on its own);
 - :mod:`.dynamics` — :class:`BatchSimulator` (``sitl_mock.dynamics.Simulator``);
 - :mod:`.flight` — sweep flights (``pf_offboard.sim.flight.SimFlight`` with the mock autopilot's
-  PX4 handling, the app's estimator and encoder, the sweep's judge) → the scalar engine's rows.
+  PX4 handling, the app's estimator and encoder, the sweep's judge) → the scalar engine's rows;
+- :mod:`.ardupilot` — the mock's ArduPilot GUIDED handling per flight (its own objects) over the
+  batched dynamics.
 
 Vectors are tuples of three ``(N,)`` arrays ``(x, y, z)``: the scalar code's float expressions
 translate one to one.

@@ -12,7 +12,9 @@ sweep's judge and the flight summary's figures as arrays. Rows come out as the s
 
 Mirrored: the PX4 profile in every output mode (``rates``: the app's attitude loop per flight with
 the scalar functions), engaged at once (``throw_engage_after_s`` 0, what sweeps fly), constant
-wind. Anything else — ArduPilot, kept logs,
+wind. ArduPilot (GUIDED, every output mode) through the mock's own per-flight handling
+(:mod:`pf_offboard.sim.batch.ardupilot`, chosen by :data:`OFFBOARD_HANDLING`), the dynamics still
+batched. Anything else — kept logs,
 the trajectory-tracking baseline, ``any_state`` feed-forward — is flown by the scalar engine
 (:func:`supported` says why); so is any single flight that leaves the mirrored path (a command
 that is not finite, an implausible estimator jump).
@@ -70,14 +72,16 @@ class _Setup:
         self.vehicle = preset(settings.vehicle)
         self.settings = settings
         tilt_param = 1.0 if self.vehicle.accel_decouple else 0.0  # MPC_ACC_DECOUPLE as the mock reports it
-        self.tilt_from_gravity = self.profile.tilts_from_gravity(tilt_param)
+        # the encoder's mapping: read from the autopilot where it reports one, else the profile's
+        self.tilt_from_gravity = (self.profile.tilts_from_gravity(tilt_param) if self.profile.accel_tilt_param is not None
+                                  else self.profile.accel_tilt_from_gravity)  # fmt: skip
         # the encoder's hover thrust: the config's, else MPC_THR_HOVER as the mock reports it (float32)
         self.hover_thrust = fs.hover_thrust if fs.hover_thrust is not None else float(np.float32(self.vehicle.hover_thrust))
 
     def unsupported(self, logs: bool) -> str | None:
         if logs:
             return "kept logs"
-        if self.settings.autopilot != "px4":
+        if self.settings.autopilot not in OFFBOARD_HANDLING:
             return f"autopilot {self.settings.autopilot}"
         if self.flight.output_mode not in ("acceleration", "attitude", "rates"):
             return f"output {self.flight.output_mode}"
@@ -281,6 +285,8 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
     zeros3 = np.zeros((3, n))
     false = np.zeros(n, dtype=bool)
     q_est: list[Any] = []
+    handling = OFFBOARD_HANDLING[setup.settings.autopilot]
+    per_flight = handling(setup, n) if handling is not None else None  # the autopilot's own OFFBOARD handling, per flight
     for i in range(max_steps):
         t_ap = sim.time_s
         # ---- telemetry: LOCAL_POSITION_NED (truth + estimator error, float32, whole ms)
@@ -310,7 +316,7 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
         else:
             v_used = v_ned
         prev = (t_est, p_ned, v_ned)
-        if setup.flight.output_mode == "rates":  # ATTITUDE_QUATERNION (truth, float32) -> the estimator's q (FLU -> ENU)
+        if setup.flight.output_mode == "rates" or per_flight is not None:  # ATTITUDE_QUATERNION (truth, float32) -> the estimator's q (FLU -> ENU)
             q_est = _estimated_attitude(_f32(np.array((sim.qw, sim.qx, sim.qy, sim.qz))))
         y_enu = np.stack((p_ned[1], p_ned[0], -p_ned[2]), axis=1)
         v_enu = np.stack((v_used[1], v_used[0], -v_used[2]), axis=1)
@@ -369,7 +375,9 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
         if not alive.any():
             break
         # ---- the encoder and the mock's OFFBOARD handling
-        if i == 0:  # no setpoint taken yet: the position hold at the stopping point
+        if per_flight is not None:
+            sp = _per_flight_setpoint(per_flight, i, cmd, y_enu, v_enu, q_est, t_est, t_ap, dt, sim, alive)
+        elif i == 0:  # no setpoint taken yet: the position hold at the stopping point
             sp = BatchSetpoint(np.full(n, POSITION, dtype=np.int64), zeros3, hold_yaw, np.zeros(n), ident, np.zeros(n), zeros3, false,
                                hold, zeros3)  # fmt: skip
         elif setup.flight.output_mode == "attitude":
@@ -407,6 +415,32 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
                                     float(ct_max[k]) if ct_any[k] else None, opt(act), opt(conv), opt(first), opt(last_out),
                                     float(max_out[k]), float(max_after[k]), rms)  # fmt: skip
     return rows, redo
+
+
+def _per_flight_setpoint(handling: Any, i: int, cmd: Any, y_enu: Arr, v_enu: Arr, q_est: list[Any], t_est: float, t_ap: float,
+                         dt: float, sim: BatchSimulator, alive: Any) -> BatchSetpoint:  # fmt: skip
+    """An autopilot handled per flight (:mod:`pf_offboard.sim.batch.ardupilot`): its estimate
+    (truth + the estimator's error, float64); the app's setpoints from the second step on (the
+    first flies the GUIDED state the throw spawned in, as the mock does)."""
+    from pf_offboard.app.estimator import StateEstimate
+
+    ep, ev = sim.estimate_error()
+    pos = np.array((sim.px, sim.py, sim.pz)) + ep
+    vel = np.array((sim.vx, sim.vy, sim.vz)) + ev
+    q = np.array((sim.qw, sim.qx, sim.qy, sim.qz))
+    est = [StateEstimate(t_est, y_enu[k], v_enu[k], q_est[k] if q_est else None, None, i + 1) for k in range(handling.n)]
+    return handling.setpoint(cmd, est, int(t_est * 1000.0), t_ap, dt, pos, vel, q, sim.landed, alive, i > 0, ep)
+
+
+def _ardupilot(setup: _Setup, n: int) -> Any:
+    from pf_offboard.sim.batch.ardupilot import ArduPilotOffboard
+
+    return ArduPilotOffboard(setup, n)
+
+
+# The mock's OFFBOARD handling per autopilot profile: None = mirrored on arrays here (PX4), else
+# a factory of the per-flight handling.
+OFFBOARD_HANDLING: dict[str, Any] = {"px4": None, "ardupilot": _ardupilot}
 
 
 # ---------------------------------------------------------------------------------- chunks

@@ -110,7 +110,7 @@ def test_flights_that_identify_the_inner_loop_follow_the_scalar_ones(tmp_path: P
                 assert abs(getattr(model, key) - float(found[key][k])) <= 1e-9, key
 
 
-def test_the_engines_give_the_same_table_for_a_gain_sweep_and_unmirrored_flights() -> None:
+def test_the_engines_give_the_same_table_for_a_gain_sweep_and_unmirrored_flights(tmp_path: Path) -> None:
     from pf_offboard.sweep import StartRanges, SweepSpec
     from pf_offboard.sweep.gains import candidates
 
@@ -119,11 +119,14 @@ def test_the_engines_give_the_same_table_for_a_gain_sweep_and_unmirrored_flights
     spec = SweepSpec(flights=3, seed=7, ranges=StartRanges(max_distance_m=1.0, max_speed_m_s=1.0), settings=tiny,
                      gains=tuple(candidates("grid", (2.0, 4.0), (0.7, 1.0), 2, 0)))  # fmt: skip
     tasks = plan.tasks(PAPER, spec)
-    # ArduPilot is not mirrored: those flights go to the scalar engine
-    other = [dataclasses.replace(tasks[0], settings=dataclasses.replace(tasks[0].settings, autopilot="ardupilot"),
-                                 start=dataclasses.replace(tasks[0].start, index=3))]  # fmt: skip
+    # ArduPilot: its own batch; kept logs are not mirrored: that flight goes to the scalar engine
+    ardu = dataclasses.replace(tasks[0], settings=dataclasses.replace(tasks[0].settings, autopilot="ardupilot"),
+                               start=dataclasses.replace(tasks[0].start, index=3))  # fmt: skip
+    logged = dataclasses.replace(tasks[0], logs_dir=str(tmp_path), start=dataclasses.replace(tasks[0].start, index=4))
+    other = [ardu, logged]
     chunks, scalar = plan_chunks([*tasks, *other], parts=2)
-    assert len(chunks) == 1 and len(chunks[0].tasks) == len(tasks) and scalar == other  # all candidates in one batch
+    assert len(chunks) == 2 and len(chunks[0].tasks) == len(tasks) and chunks[1].tasks == (ardu,)  # all candidates in one batch
+    assert scalar == [logged]
     batch = execute([*tasks, *other], engine="batch")
     assert rows_equal(batch, execute([*tasks, *other], engine="scalar"))
     assert len({r["gains_id"] for r in batch}) == 4
