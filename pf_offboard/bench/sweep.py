@@ -6,6 +6,8 @@
 - the scalar engine on the first 20 of the same starts (``--quick``: 4), serially: its CPU time per
   flight, the 1000-flight time on 2 workers *extrapolated* from it (ideal parallel speed-up), the
   ratio; the two engines' rows of that sample must be identical (checked, not timed);
+- the same on the ArduPilot profile with the arducopter preset (the mock's GUIDED handling per
+  flight over the batched dynamics): batch time, the scalar sample, the ratio, rows identical;
 - a 20 x 20 gain grid (``--quick``: 4 x 4), 10 flights each (``--quick``: 4), on the batch engine:
   wall time and the best candidate with its region-of-attraction figure (success rate);
 - Dask in local mode (2 single-threaded worker processes) on 200 of the starts (``--quick``: 50),
@@ -72,6 +74,8 @@ def run(quick: bool = False, workers: int = WORKERS) -> dict[str, Any]:
     out["speedup_batch_over_scalar"] = out["scalar_wall_s_extrapolated"] / out["batch_wall_s"]
     out["sample_rows_identical"] = rows_equal(rows[:sample_n], scalar_rows)
 
+    out["ardupilot"] = _ardupilot(quick, workers)
+
     points, per = (4, 4) if quick else (20, 10)
     from pf_offboard.config import load_config
 
@@ -106,5 +110,37 @@ def run(quick: bool = False, workers: int = WORKERS) -> dict[str, Any]:
         out["dask_rows_identical"] = rows_equal(dask_rows, rows[: len(few)])
     else:
         out["dask_local"] = "not installed (pip install 'pf-offboard[cluster]')"
+    out["load_average_1min_at_end"] = os.getloadavg()[0]
+    return out
+
+
+def _ardupilot(quick: bool, workers: int) -> dict[str, Any]:
+    """The 1000 starts (``--quick``: 100) on the ArduPilot profile and the arducopter preset."""
+    from pf_offboard.sweep import plan, report
+    from pf_offboard.sweep.runner import FlightSettings, execute, rows_equal
+
+    flights = 100 if quick else 1000
+    sample_n = 4 if quick else 20
+    settings = dataclasses.replace(FlightSettings(), vehicle="arducopter", autopilot="ardupilot")
+    spec = plan.SweepSpec(flights=flights, settings=settings)
+    tasks = plan.tasks(CONFIG, spec)
+    out: dict[str, Any] = {"flights": flights, "vehicle": "arducopter", "autopilot": "ardupilot",
+                           "output_mode": settings.output_mode or "the config's", "load_average_1min_at_start": os.getloadavg()[0]}  # fmt: skip
+    c0, t0 = _cpu(), time.perf_counter()
+    rows = execute(tasks, workers=workers, engine="batch")
+    out["batch_wall_s"] = time.perf_counter() - t0
+    out["batch_cpu_s"] = _cpu() - c0
+    out["batch_wall_s_on_idle_cores"] = out["batch_cpu_s"] / workers
+    stats = report.summarize(rows, str(CONFIG), dataclasses.asdict(settings))
+    out["batch_success_rate"] = stats["success_rate"]
+    for key in ("p50", "p90", "p99"):
+        out[f"batch_caught_{key}_s"] = stats["caught_time"][f"{key}_s"]
+    c0, t0 = time.process_time(), time.perf_counter()
+    scalar_rows = execute(tasks[:sample_n], workers=1, engine="scalar")
+    out["scalar_sample_flights"] = sample_n
+    out["scalar_cpu_s_per_flight"] = (time.process_time() - c0) / sample_n
+    out["scalar_wall_s_extrapolated"] = (time.perf_counter() - t0) / sample_n * flights / workers
+    out["speedup_batch_over_scalar"] = out["scalar_wall_s_extrapolated"] / out["batch_wall_s"]
+    out["sample_rows_identical"] = rows_equal(rows[:sample_n], scalar_rows)
     out["load_average_1min_at_end"] = os.getloadavg()[0]
     return out

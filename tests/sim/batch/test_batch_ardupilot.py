@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pf_offboard.sim.batch.flight import fly, supported
+from pf_offboard.sim.batch.flight import fly, plan_chunks, supported
 from pf_offboard.sim.flight import SimFlight
 from pf_offboard.sweep import plan
 from pf_offboard.sweep.runner import FlightSettings, _Judge, rows_equal, run_flight, sim_spec
@@ -53,3 +53,20 @@ def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (output, k, worst)
         assert rows_equal([rows[task.key]], [run_flight(task)])
+
+
+def test_a_sweep_on_ardupilot_gives_the_same_starts_rows_and_statistics_on_both_engines() -> None:
+    from pf_offboard.sweep import report
+    from pf_offboard.sweep.runner import execute
+
+    settings = FlightSettings(vehicle="arducopter", autopilot="ardupilot", duration_s=6.0, settle_s=2.0)
+    spec = plan.SweepSpec(flights=4, seed=11, settings=settings)
+    tasks = plan.tasks(PX4_SIH, spec)
+    assert [t.start for t in tasks] == [t.start for t in plan.tasks(PX4_SIH, spec)]  # same seed, same starts
+    chunks, unmirrored = plan_chunks(tasks, parts=1)
+    assert not unmirrored and not fly(tasks)[1]  # every flight on the batch engine
+    batch = execute(tasks, engine="batch")
+    scalar = execute(tasks, engine="scalar")
+    assert rows_equal(batch, scalar)
+    assert report.summarize(batch, "c") == report.summarize(scalar, "c")
+    assert 0.0 <= report.summarize(batch, "c")["success_rate"] <= 1.0
