@@ -253,7 +253,8 @@ def fly(tasks: Sequence[Any], trace: list[Arr] | None = None,
 
 def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: BatchFollower, hold: Arr, hold_yaw: Arr, n: int,
           dt: float, max_steps: int, finish_row: Any, trace: list[Arr] | None) -> tuple[dict[tuple[int, int], dict[str, Any]], list[Any]]:  # fmt: skip
-    from pf_offboard.app.estimator import VELOCITY_CORRECTION_GAP_S, VELOCITY_CORRECTION_MAX_M_S, VELOCITY_RESIDUAL_MAX_M_S
+    from pf_offboard.app.estimator import (MAX_ACCEL_M_S2, VELOCITY_CORRECTION_GAP_S, VELOCITY_CORRECTION_MAX_M_S, VELOCITY_MARGIN_M_S,
+                                           VELOCITY_RESIDUAL_MAX_M_S)  # fmt: skip
 
     s = setup.settings
     timed = follower.compensator is not None
@@ -299,6 +300,10 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
             dts = t_est - prev[0]
             allowed = 1.0 + (np.maximum(np.sqrt(np.sum(prev[2] ** 2, axis=0)), np.sqrt(np.sum(v_ned**2, axis=0))) + 5.0) * max(dts, 0.0)
             jump = np.sqrt(np.sum((p_ned - prev[1]) ** 2, axis=0)) > 0.5 * allowed
+            # its velocity bound too (a crash stops the vehicle within one sample): the estimate's
+            # previous velocity carries the correction (<= VELOCITY_CORRECTION_MAX_M_S), the raw one not
+            dv = np.sqrt(np.sum((v_ned - prev[2]) ** 2, axis=0))
+            jump |= dv > 0.5 * (VELOCITY_MARGIN_M_S + MAX_ACCEL_M_S2 * max(dts, 0.0)) - VELOCITY_CORRECTION_MAX_M_S
             fallback |= alive & jump  # near the estimator's plausibility bound: fly it scalar
         if tau is not None:
             if prev is not None and 0.0 < t_est - prev[0] <= VELOCITY_CORRECTION_GAP_S:
