@@ -45,14 +45,18 @@ def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre
     assert max(np.hypot(*t.start.wind_enu_m_s[:2]) for t in tasks) > 0.3  # in wind
     trace: list[np.ndarray] = []
     rows, redo = fly(tasks, trace)
-    assert not redo
     batch = np.array(trace)
     for k, task in enumerate(tasks):
         scalar = _scalar_trajectory(task)
         assert len(scalar) > 100
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (output, k, worst)
-        assert rows_equal([rows[task.key]], [run_flight(task)])
+        row = run_flight(task)
+        if task in redo:  # only a crash (the estimator refuses its sample) hands a flight to the scalar engine
+            assert row["crashed"] and task.key not in rows
+        else:
+            assert rows_equal([rows[task.key]], [row])
+    assert len(redo) < len(tasks)
 
 
 def test_a_sweep_on_ardupilot_gives_the_same_starts_rows_and_statistics_on_both_engines() -> None:
