@@ -36,8 +36,10 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
         shutil.copytree(ROOT / name, src / name, ignore=ignore)
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(ROOT / name, src / name)
+    # PIP_RETRIES=0: without a network (a sandbox, `unshare -n`) pip's isolated build env otherwise
+    # retries the unreachable index for ~22 s before using the local/find-links wheels; same wheel either way
     build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--quiet", str(src), "-w", str(tmp / "wheel")],
-                           capture_output=True, text=True, timeout=170)  # fmt: skip
+                           capture_output=True, text=True, timeout=170, env={**os.environ, "PIP_RETRIES": "0"})  # fmt: skip
     assert build.returncode == 0, f"building the wheel failed:\n{build.stdout}\n{build.stderr}"
     (wheel,) = (tmp / "wheel").glob("pf_offboard-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
