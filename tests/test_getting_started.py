@@ -4,7 +4,7 @@ its own network namespace; the test skips when the ports are taken).
 
 - `# file: NAME` as the first line of a ```yaml block writes that block to NAME first;
 - a command whose comment says "not run in the tests" needs hardware or a real SITL build;
-- a `sitl-mock` line is "terminal 1": started in the background (with `--speed 2`, the one
+- a `sitl-mock` line is "terminal 1": started in the background (with `--speed 4`, the one
   change, so the suite stays quick) and stopped before the next one starts;
 - each command must exit 0; a flight's summary.json must report a cross-track RMS ≤ 5 cm.
 """
@@ -99,7 +99,7 @@ def test_every_command_of_the_guide_runs(tmp_path, monkeypatch, capsys) -> None:
                 if mock is not None:
                     mock.terminate()
                     mock.wait(10)
-                mock = subprocess.Popen([str(bin_dir / "sitl-mock"), *argv[1:], "--speed", "2"], cwd=tmp_path, env=env,
+                mock = subprocess.Popen([str(bin_dir / "sitl-mock"), *argv[1:], "--speed", "4"], cwd=tmp_path, env=env,
                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
                 _wait_for_mock(mock)
                 continue
