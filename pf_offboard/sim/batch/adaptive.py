@@ -1,14 +1,12 @@
 """:class:`pf_offboard.control.adaptive.ResponseIdentifier` for N flights sampled at the same
-instants: the same candidate bank, the same update order and the same adoption rule, each
-candidate's state an array over the flights (one Python loop over the candidates, as the scalar's).
-
-Built from the scalar identifier (its bank and initial candidate), whose module constants it
-reads, so a change of those reaches both engines; a change of its *code* needs the mirrored edit
-here (tests/sim/batch/ compare whole flights with the identification on).
+instants: one scalar identifier per flight (the same code, so nothing to keep in step), fed its
+flight's velocity and its flight's column of the recorded setpoints. The setpoint history's
+pieces are computed once per candidate delay for all flights and sliced per flight.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 from typing import Any
@@ -16,97 +14,60 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pf_offboard.control import adaptive as A
+from pf_offboard.control.adaptive import ResponseIdentifier
 
 Arr = NDArray[np.float64]
 V = tuple[Arr, Arr, Arr]
+Vec = tuple[float, float, float]
+_ZERO: Vec = (0.0, 0.0, 0.0)  # no setpoint recorded yet (the batch compensator's None)
 
 
 class BatchIdentifier:
-    """The bank of (lag, dead time) models per flight. ``active``: the adopted candidate per flight
-    (-1: none yet, the scalar's None)."""
+    """The bank of (lag, dead time) models per flight: ``flights[i]`` is flight ``i``'s own
+    :class:`ResponseIdentifier` (a copy of the scalar one). ``active``: the adopted candidate per
+    flight (-1: none yet, the scalar's None)."""
 
-    def __init__(self, scalar: Any, n: int) -> None:
-        self.gain = scalar.gain
-        self.delays = scalar.delays
-        self.lags = scalar.lags
-        self.initial_index = scalar.initial_index
-        self.max_delay_s = scalar.max_delay_s
+    def __init__(self, scalar: ResponseIdentifier, n: int) -> None:
         self.n = n
-        nl = len(self.lags)
-        k = len(self.delays) * nl
-        self.cand_lag = np.array([self.lags[i % nl] for i in range(k)])
-        self.cand_delay = np.array([self.delays[i // nl] for i in range(k)])
+        self.flights = [copy.deepcopy(scalar) for _ in range(n)]
         self.reset()
 
     def reset(self) -> None:
-        n, k = self.n, len(self.delays) * len(self.lags)
-        self._a = [[np.zeros(n), np.zeros(n)] for _ in range(k)]
-        self._v = [[np.zeros(n), np.zeros(n)] for _ in range(k)]
-        self._d = [[np.zeros(n), np.zeros(n)] for _ in range(k)]
-        self._drag = [np.zeros(n) for _ in range(k)]
-        self.score = np.zeros((k, n))
-        self._t: float | None = None
-        self.data_s = 0.0
-        self.active = np.full(n, -1, dtype=np.int64)
+        for ident in self.flights:
+            ident.reset()
+
+    @property
+    def active(self) -> NDArray[np.int64]:
+        return np.array([-1 if f.active is None else f.active for f in self.flights], dtype=np.int64)
 
     @property
     def drag_1_s(self) -> Arr:
         """The active candidate's drag per flight (NaN where none is adopted: the scalar's None)."""
-        drag = np.array(self._drag)
-        rows = np.arange(self.n)
-        return np.where(self.active >= 0, drag[np.maximum(self.active, 0), rows], math.nan)
+        return np.array([math.nan if (d := f.drag_1_s) is None else d for f in self.flights])
 
     def update(self, time_s: float, velocity: V, pieces: Callable[[float, float, float], list[tuple[float, V | None]]]) -> tuple[NDArray[np.bool_], Arr, Arr] | None:  # fmt: skip
-        """:meth:`ResponseIdentifier.update`: (adopted now per flight, its lag, its delay), or None
-        when no flight can adopt at this step."""
-        t_prev, self._t = self._t, time_s
-        vx, vy = velocity[0], velocity[1]
-        if t_prev is None:
-            for v in self._v:
-                v[0], v[1] = vx, vy
+        """:meth:`ResponseIdentifier.update` per flight: (adopted now per flight, its lag, its
+        delay; NaN where none was adopted), or None when no flight adopted at this step."""
+        shared: dict[float, list[tuple[float, list[list[float]] | None]]] = {}
+
+        def segments(t0: float, t1: float, delay: float) -> list[tuple[float, list[list[float]] | None]]:
+            if delay not in shared:  # once per delay for all flights, the setpoints as lists per axis
+                shared[delay] = [(h, None if sp is None else [np.asarray(c, dtype=float).tolist() for c in sp])
+                                 for h, sp in pieces(t0, t1, delay)]  # fmt: skip
+            return shared[delay]
+
+        found: list[tuple[float, float] | None] = []
+        vx, vy, vz = (np.asarray(c, dtype=float).tolist() for c in velocity)
+        for i, ident in enumerate(self.flights):
+
+            def own(t0: float, t1: float, delay: float, i: int = i) -> list[tuple[float, Vec]]:
+                return [(h, _ZERO if sp is None else (sp[0][i], sp[1][i], sp[2][i]))
+                        for h, sp in segments(t0, t1, delay)]  # fmt: skip
+
+            found.append(ident.update(time_s, (vx[i], vy[i], vz[i]), own))
+        if all(f is None for f in found):
             return None
-        dt = time_s - t_prev
-        if dt <= 0.0:
-            return None
-        nl = len(self.lags)
-        w = A.OBSERVER_RAD_S
-        l1, l2 = 2.0 * w * dt, w * w * dt
-        c = min(1.0, dt / A.SCORE_TIME_S)
-        g = self.gain
-        score = self.score
-        for i, delay in enumerate(self.delays):
-            segs = pieces(t_prev, time_s, delay)
-            for j, lag in enumerate(self.lags):
-                k = i * nl + j
-                a, v, d = self._a[k], self._v[k], self._d[k]
-                cd = self._drag[k]
-                for h, sp in segs:
-                    if h <= 0.0:
-                        continue
-                    alpha = math.exp(-h / lag)
-                    m = (lag / h) * (1.0 - alpha)
-                    for ax in (0, 1):
-                        u = g * sp[ax] if sp is not None else g * 0.0
-                        mean_a = u + (a[ax] - u) * m
-                        a[ax] = u + (a[ax] - u) * alpha
-                        v[ax] = v[ax] + h * (mean_a + d[ax] - cd * velocity[ax])
-                ex, ey = vx - v[0], vy - v[1]
-                cd = cd - A.DRAG_RATE * dt * (ex * vx + ey * vy)
-                self._drag[k] = np.where(cd < 0.0, 0.0, np.where(cd > A.MAX_DRAG_1_S, A.MAX_DRAG_1_S, cd))
-                v[0] = v[0] + l1 * ex
-                v[1] = v[1] + l1 * ey
-                d[0] = d[0] + l2 * ex
-                d[1] = d[1] + l2 * ey
-                score[k] = score[k] + c * (ex * ex + ey * ey - score[k])
-        self.data_s += dt
-        if self.data_s < A.MIN_DATA_S:
-            return None
-        best = np.argmin(score, axis=0)  # the first of equal scores, as min(range, key=)
-        rows = np.arange(self.n)
-        none = self.active < 0
-        current = np.where(none, self.initial_index, self.active)
-        ratio = np.where(none, A.ADOPT_RATIO, A.SWITCH_RATIO)
-        adopt = (best != current) & (score[best, rows] < ratio * score[current, rows])
-        self.active = np.where(adopt, best, self.active)
-        return adopt, self.cand_lag[best], self.cand_delay[best]
+        adopt = np.array([f is not None for f in found])
+        lag = np.array([math.nan if f is None else f[0] for f in found])
+        delay = np.array([math.nan if f is None else f[1] for f in found])
+        return adopt, lag, delay

@@ -4,41 +4,18 @@ trajectory of every flight agrees to 1e-6 m and every row of the table is identi
 
 from __future__ import annotations
 
-import tempfile
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from pf_offboard.sim.batch.flight import fly, plan_chunks, supported
-from pf_offboard.sim.flight import SimFlight
 from pf_offboard.sweep import plan
-from pf_offboard.sweep.runner import FlightSettings, _Judge, rows_equal, run_flight, sim_spec
+from pf_offboard.sweep.runner import FlightSettings, rows_equal, run_flight
 
 from ..helpers import PX4_SIH
 
 
-def _scalar_trajectory(task) -> np.ndarray:  # type: ignore[no-untyped-def]
-    with tempfile.TemporaryDirectory() as tmp:
-        cfg = Path(tmp) / "config.yaml"
-        cfg.write_text(task.config_yaml, encoding="utf-8")
-        flight = SimFlight(cfg, sim_spec(task), tmp, write_logs=False)
-        flight.summary = _Judge(flight.summary, task.settings)  # type: ignore[assignment]
-        out: list[np.ndarray] = []
-        step = flight.autopilot.step
-
-        def recorded(dt_s: float):  # type: ignore[no-untyped-def]
-            events = step(dt_s)
-            out.append(np.array(flight.autopilot.truth.position_ned_m))
-            return events
-
-        flight.autopilot.step = recorded  # type: ignore[method-assign]
-        flight.run()
-    return np.array(out)
-
-
 @pytest.mark.parametrize("output", ["acceleration", "attitude", "rates"])
-def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(output: str) -> None:
+def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(output: str, scalar_trajectory) -> None:
     settings = FlightSettings(vehicle="arducopter", autopilot="ardupilot", duration_s=10.0, settle_s=3.0, output_mode=output)
     tasks = plan.tasks(PX4_SIH, plan.SweepSpec(flights=2, seed=5, settings=settings))
     assert all(supported(t) is None for t in tasks)
@@ -47,7 +24,7 @@ def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre
     rows, redo = fly(tasks, trace)
     batch = np.array(trace)
     for k, task in enumerate(tasks):
-        scalar = _scalar_trajectory(task)
+        scalar = scalar_trajectory(task)
         assert len(scalar) > 100
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (output, k, worst)

@@ -8,7 +8,6 @@ the typical model."""
 from __future__ import annotations
 
 import dataclasses
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -16,42 +15,19 @@ import pytest
 import yaml
 
 from pf_offboard.sim.batch.flight import fly, plan_chunks, supported
-from pf_offboard.sim.flight import SimFlight
 from pf_offboard.sweep import plan
-from pf_offboard.sweep.runner import FlightSettings, _Judge, execute, rows_equal, run_flight, sim_spec
+from pf_offboard.sweep.runner import FlightSettings, execute, rows_equal, run_flight
 
 from ..helpers import PX4_SIH, ROOT
 
 PAPER = ROOT / "configs" / "paper.yaml"
 
 
-def _scalar_trajectory(task, followers: list | None = None) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """The true positions (NED) after every step of the scalar flight of ``task`` (``followers``:
-    gets its PathFollower)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        cfg = Path(tmp) / "config.yaml"
-        cfg.write_text(task.config_yaml, encoding="utf-8")
-        flight = SimFlight(cfg, sim_spec(task), tmp, write_logs=False)
-        flight.summary = _Judge(flight.summary, task.settings)  # type: ignore[assignment]
-        out: list[np.ndarray] = []
-        step = flight.autopilot.step
-
-        def recorded(dt_s: float):  # type: ignore[no-untyped-def]
-            events = step(dt_s)
-            out.append(np.array(flight.autopilot.truth.position_ned_m))
-            return events
-
-        flight.autopilot.step = recorded  # type: ignore[method-assign]
-        flight.run()
-        if followers is not None:
-            followers.append(flight.pipeline.follower)
-    return np.array(out)
-
-
 @pytest.mark.parametrize(("vehicle", "output", "flights"), [
     ("px4-sih", None, 2), ("arducopter", None, 1), ("px4-sih", "attitude", 1), ("arducopter", "rates", 1),
 ])
-def test_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(vehicle: str, output: str | None, flights: int) -> None:
+def test_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(vehicle: str, output: str | None, flights: int,
+                                                                       scalar_trajectory) -> None:  # fmt: skip
     settings = FlightSettings(vehicle=vehicle, duration_s=10.0, settle_s=3.0, output_mode=output)
     tasks = plan.tasks(PX4_SIH, plan.SweepSpec(flights=flights, seed=3, settings=settings))
     assert all(supported(t) is None for t in tasks)
@@ -61,7 +37,7 @@ def test_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(vehicle: 
     assert not redo
     batch = np.array(trace)  # (steps, 3, N)
     for k, task in enumerate(tasks):
-        scalar = _scalar_trajectory(task)
+        scalar = scalar_trajectory(task)
         assert len(scalar) == 1000
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (vehicle, k, worst)
@@ -84,7 +60,7 @@ def _identifying_config(tmp: Path) -> Path:
     ("px4-sih", "attitude", 1, False), ("arducopter", None, 1, False),
 ])  # fmt: skip
 def test_flights_that_identify_the_inner_loop_follow_the_scalar_ones(tmp_path: Path, vehicle: str, output: str | None,
-                                                                     flights: int, adopts: bool) -> None:  # fmt: skip
+                                                                     flights: int, adopts: bool, scalar_trajectory) -> None:  # fmt: skip
     settings = FlightSettings(vehicle=vehicle, duration_s=10.0, settle_s=3.0, output_mode=output)
     tasks = plan.tasks(_identifying_config(tmp_path), plan.SweepSpec(flights=flights, seed=3, settings=settings))
     assert all(supported(t) is None for t in tasks)
@@ -97,7 +73,7 @@ def test_flights_that_identify_the_inner_loop_follow_the_scalar_ones(tmp_path: P
     found = followers[0].compensator.identified()
     for k, task in enumerate(tasks):
         scalar_followers: list = []
-        scalar = _scalar_trajectory(task, scalar_followers)
+        scalar = scalar_trajectory(task, scalar_followers)
         assert len(scalar) == 1000
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (vehicle, k, worst)
