@@ -169,8 +169,10 @@ def sim_spec(task: FlightTask) -> Any:
     )
 
 
-def run_flight(task: FlightTask) -> dict[str, Any]:
-    """Fly one task in process (no logs unless ``task.logs_dir``) and return its table row."""
+def run_flight(task: FlightTask, observe: Callable[[Any], None] | None = None) -> dict[str, Any]:
+    """Fly one task in process (no logs unless ``task.logs_dir``) and return its table row.
+    ``observe``: called with the :class:`~pf_offboard.sim.flight.SimFlight` before it flies (to
+    record more of it than the row; the tests compare the engines' trajectories this way)."""
     from pf_offboard.sim.flight import SimFlight
 
     st, s = task.start, task.settings
@@ -185,6 +187,8 @@ def run_flight(task: FlightTask) -> dict[str, Any]:
             flight = SimFlight(config_path, spec, out_dir, write_logs=task.logs_dir is not None)
             judge = _Judge(flight.summary, s)
             flight.summary = judge  # type: ignore[assignment]
+            if observe is not None:
+                observe(flight)
             result = flight.run()
         except Exception as exc:  # one broken flight is a row, not a lost sweep
             row.update(outcome(False, False, False, f"error: {type(exc).__name__}: {exc}", None, None, math.nan, math.nan, math.nan,

@@ -1,29 +1,23 @@
-"""Shared by the batch-engine tests: the scalar ``sim`` flight's true trajectory, the reference
-the batch engine's flights are compared with."""
+"""Shared by the batch-engine tests: the scalar ``sim`` flight of a task, the reference the batch
+engine's flights are compared with."""
 
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from pf_offboard.sim.flight import SimFlight
-from pf_offboard.sweep.runner import _Judge, sim_spec
+from pf_offboard.sweep.runner import run_flight
 
 
-def _scalar_trajectory(task: Any, followers: list | None = None) -> np.ndarray:
-    """The true positions (NED) after every step of the scalar flight of ``task`` (``followers``:
-    gets its PathFollower)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        cfg = Path(tmp) / "config.yaml"
-        cfg.write_text(task.config_yaml, encoding="utf-8")
-        flight = SimFlight(cfg, sim_spec(task), tmp, write_logs=False)
-        flight.summary = _Judge(flight.summary, task.settings)  # type: ignore[assignment]
-        out: list[np.ndarray] = []
+def _scalar_flight(task: Any, followers: list | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    """One scalar flight of ``task`` (the sweep's ``run_flight``): the true positions (NED) after
+    every step, and its table row (``followers``: gets its PathFollower)."""
+    out: list[np.ndarray] = []
+
+    def observe(flight: Any) -> None:
         step = flight.autopilot.step
 
         def recorded(dt_s: float):  # type: ignore[no-untyped-def]
@@ -31,15 +25,16 @@ def _scalar_trajectory(task: Any, followers: list | None = None) -> np.ndarray:
             out.append(np.array(flight.autopilot.truth.position_ned_m))
             return events
 
-        flight.autopilot.step = recorded  # type: ignore[method-assign]
-        flight.run()
+        flight.autopilot.step = recorded
         if followers is not None:
             followers.append(flight.pipeline.follower)
-    return np.array(out)
+
+    row = run_flight(task, observe)
+    return np.array(out), row
 
 
 @pytest.fixture
-def scalar_trajectory() -> Callable[..., np.ndarray]:
-    """``scalar_trajectory(task, followers=None)``: the scalar flight's true positions (NED) after
-    every step."""
-    return _scalar_trajectory
+def scalar_flight() -> Callable[..., tuple[np.ndarray, dict[str, Any]]]:
+    """``scalar_flight(task, followers=None)``: (true positions NED after every step, table row)
+    of the scalar flight of ``task``, flown once for both."""
+    return _scalar_flight

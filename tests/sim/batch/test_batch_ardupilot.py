@@ -9,13 +9,13 @@ import pytest
 
 from pf_offboard.sim.batch.flight import fly, plan_chunks, supported
 from pf_offboard.sweep import plan
-from pf_offboard.sweep.runner import FlightSettings, rows_equal, run_flight
+from pf_offboard.sweep.runner import FlightSettings, rows_equal
 
 from ..helpers import PX4_SIH
 
 
 @pytest.mark.parametrize("output", ["acceleration", "attitude", "rates"])
-def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(output: str, scalar_trajectory) -> None:
+def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(output: str, scalar_flight) -> None:
     settings = FlightSettings(vehicle="arducopter", autopilot="ardupilot", duration_s=10.0, settle_s=3.0, output_mode=output)
     tasks = plan.tasks(PX4_SIH, plan.SweepSpec(flights=2, seed=5, settings=settings))
     assert all(supported(t) is None for t in tasks)
@@ -24,11 +24,10 @@ def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre
     rows, redo = fly(tasks, trace)
     batch = np.array(trace)
     for k, task in enumerate(tasks):
-        scalar = scalar_trajectory(task)
+        scalar, row = scalar_flight(task)
         assert len(scalar) > 100
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (output, k, worst)
-        row = run_flight(task)
         if task in redo:  # only a crash (the estimator refuses its sample) hands a flight to the scalar engine
             assert row["crashed"] and task.key not in rows
         else:

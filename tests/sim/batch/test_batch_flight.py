@@ -16,7 +16,7 @@ import yaml
 
 from pf_offboard.sim.batch.flight import fly, plan_chunks, supported
 from pf_offboard.sweep import plan
-from pf_offboard.sweep.runner import FlightSettings, execute, rows_equal, run_flight
+from pf_offboard.sweep.runner import FlightSettings, execute, rows_equal
 
 from ..helpers import PX4_SIH, ROOT
 
@@ -27,7 +27,7 @@ PAPER = ROOT / "configs" / "paper.yaml"
     ("px4-sih", None, 2), ("arducopter", None, 1), ("px4-sih", "attitude", 1), ("arducopter", "rates", 1),
 ])
 def test_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(vehicle: str, output: str | None, flights: int,
-                                                                       scalar_trajectory) -> None:  # fmt: skip
+                                                                       scalar_flight) -> None:  # fmt: skip
     settings = FlightSettings(vehicle=vehicle, duration_s=10.0, settle_s=3.0, output_mode=output)
     tasks = plan.tasks(PX4_SIH, plan.SweepSpec(flights=flights, seed=3, settings=settings))
     assert all(supported(t) is None for t in tasks)
@@ -37,11 +37,11 @@ def test_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(vehicle: 
     assert not redo
     batch = np.array(trace)  # (steps, 3, N)
     for k, task in enumerate(tasks):
-        scalar = scalar_trajectory(task)
+        scalar, row = scalar_flight(task)
         assert len(scalar) == 1000
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (vehicle, k, worst)
-        assert rows_equal([rows[task.key]], [run_flight(task)])
+        assert rows_equal([rows[task.key]], [row])
 
 
 def _identifying_config(tmp: Path) -> Path:
@@ -60,7 +60,7 @@ def _identifying_config(tmp: Path) -> Path:
     ("px4-sih", "attitude", 1, False), ("arducopter", None, 1, False),
 ])  # fmt: skip
 def test_flights_that_identify_the_inner_loop_follow_the_scalar_ones(tmp_path: Path, vehicle: str, output: str | None,
-                                                                     flights: int, adopts: bool, scalar_trajectory) -> None:  # fmt: skip
+                                                                     flights: int, adopts: bool, scalar_flight) -> None:  # fmt: skip
     settings = FlightSettings(vehicle=vehicle, duration_s=10.0, settle_s=3.0, output_mode=output)
     tasks = plan.tasks(_identifying_config(tmp_path), plan.SweepSpec(flights=flights, seed=3, settings=settings))
     assert all(supported(t) is None for t in tasks)
@@ -73,11 +73,11 @@ def test_flights_that_identify_the_inner_loop_follow_the_scalar_ones(tmp_path: P
     found = followers[0].compensator.identified()
     for k, task in enumerate(tasks):
         scalar_followers: list = []
-        scalar = scalar_trajectory(task, scalar_followers)
+        scalar, row = scalar_flight(task, scalar_followers)
         assert len(scalar) == 1000
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (vehicle, k, worst)
-        assert rows_equal([rows[task.key]], [run_flight(task)])
+        assert rows_equal([rows[task.key]], [row])
         model = scalar_followers[0].compensator.identified
         assert (model is not None) == adopts == (not np.isnan(found["adopted_at_s"][k]))
         if model is not None:  # the fast preset answers at once: a shorter dead time, the same one in both
