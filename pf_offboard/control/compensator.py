@@ -56,6 +56,7 @@ OFFSET_INTEGRAL_BAND_M = 0.2
 ADAPT_SLEW = 0.1
 ADAPT_DRAG_SLEW = 0.5  # 1/s per s
 DRAG_ESTIMATE_SLEW = 0.5  # 1/s per s: the initial candidate's settled drag, adopted on its own
+DRAG_LOG_STEP_1_S = 0.1  # ... reported as identified (lag and dead time unchanged) when it moved this much
 
 
 class InnerLoopCompensator:
@@ -233,6 +234,8 @@ class InnerLoopCompensator:
         if self._target is None:
             drag = self.identifier.drag_estimate_1_s
             if drag is not None:
+                if self.identified is None or abs(drag - self.identified.drag_1_s) > DRAG_LOG_STEP_1_S:
+                    self.identified = IdentifiedModel(self.lag[0], self.delay_s, drag, time_s)  # logged (the pipeline)
                 cur, step = self.drag[0], DRAG_ESTIMATE_SLEW * (time_s - t_prev)
                 self._set_drag(cur + max(-step, min(step, drag - cur)), velocity)
             return
