@@ -234,7 +234,8 @@ class InnerLoopCompensator:
         if self._target is None:
             drag = self.identifier.drag_estimate_1_s
             if drag is not None:
-                if self.identified is None or abs(drag - self.identified.drag_1_s) > DRAG_LOG_STEP_1_S:
+                logged = self.model.drag_xy_1_s if self.identified is None else self.identified.drag_1_s
+                if abs(drag - logged) > DRAG_LOG_STEP_1_S:
                     self.identified = IdentifiedModel(self.lag[0], self.delay_s, drag, time_s)  # logged (the pipeline)
                 cur, step = self.drag[0], DRAG_ESTIMATE_SLEW * (time_s - t_prev)
                 self._set_drag(cur + max(-step, min(step, drag - cur)), velocity)

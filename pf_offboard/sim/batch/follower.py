@@ -358,7 +358,8 @@ class _Compensator:
         drag = self.identifier.drag_estimate_1_s
         free = ~rows & ~np.isnan(drag)
         if free.any():
-            log = free & (np.isnan(self._identified[2]) | (np.abs(drag - self._identified[2]) > DRAG_LOG_STEP_1_S))
+            logged = np.where(np.isnan(self._identified[2]), self.c.model.drag_xy_1_s, self._identified[2])
+            log = free & (np.abs(drag - logged) > DRAG_LOG_STEP_1_S)
             if log.any():
                 new = (self.lag[0], self.horizon_s, drag, np.full(self.n, time_s))
                 self._identified = tuple(np.where(log, x, old) for x, old in zip(new, self._identified))
