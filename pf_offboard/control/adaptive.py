@@ -32,16 +32,6 @@ SCORE_TIME_S = 4.0  # the score's memory
 MIN_DATA_S = 3.0  # of scored flight before a candidate is adopted
 ADOPT_RATIO = 0.8  # the initial model is left only for a candidate with less than this share of its score
 SWITCH_RATIO = 0.6  # a candidate replaces the active one when its score is below this share of it
-# The initial candidate's drag, used on its own while no candidate is adopted (PX4 SIH: the dead time
-# never shortens, yet its 1/s of drag is what the typical model misses at speed), only once settled:
-# averaged over DRAG_MEAN_S (its raw estimate swings +-0.3/s within a second) from MIN_DATA_S on (its
-# rise from 0 left out), over at least DRAG_SETTLE_S of flight at DRAG_MIN_SPEED_M_S or more (drag is
-# seen only in motion), with a spread (standard deviation over the average's memory) of at most
-# DRAG_MAX_STD_1_S.
-DRAG_MEAN_S = 4.0
-DRAG_SETTLE_S = 5.0
-DRAG_MIN_SPEED_M_S = 1.0
-DRAG_MAX_STD_1_S = 0.35
 
 
 @dataclass(frozen=True)
@@ -82,18 +72,6 @@ class ResponseIdentifier:
         self._t: float | None = None
         self.data_s = 0.0
         self.active: int | None = None
-        self._drag_mean: float | None = None
-        self._drag_var = 0.0
-        self._drag_s = 0.0  # of flight at DRAG_MIN_SPEED_M_S or more
-
-    @property
-    def drag_estimate_1_s(self) -> float | None:
-        """The initial candidate's settled horizontal drag (1/s): its average once it has seen
-        DRAG_SETTLE_S of flight at speed and its spread is within DRAG_MAX_STD_1_S; None before, while
-        it is not, or once a candidate is adopted (its drag is :attr:`drag_1_s`)."""
-        if self.active is not None or self._drag_mean is None or self._drag_s < DRAG_SETTLE_S:
-            return None
-        return self._drag_mean if self._drag_var <= DRAG_MAX_STD_1_S * DRAG_MAX_STD_1_S else None
 
     def candidate(self, k: int) -> tuple[float, float]:
         """(lag s, delay s) of candidate ``k``."""
@@ -149,16 +127,6 @@ class ResponseIdentifier:
                 d[1] += l2 * ey
                 self.score[k] += c * (ex * ex + ey * ey - self.score[k])
         self.data_s += dt
-        if self.data_s >= MIN_DATA_S and vx * vx + vy * vy >= DRAG_MIN_SPEED_M_S * DRAG_MIN_SPEED_M_S:
-            x = self._drag[self.initial_index]
-            if self._drag_mean is None:
-                self._drag_mean = x
-            else:
-                cm = min(1.0, dt / DRAG_MEAN_S)
-                dev = x - self._drag_mean
-                self._drag_mean += cm * dev
-                self._drag_var += cm * (dev * dev - self._drag_var)
-            self._drag_s += dt
         if self.data_s < MIN_DATA_S:
             return None
         best = min(range(len(self.score)), key=self.score.__getitem__)

@@ -55,8 +55,6 @@ OFFSET_INTEGRAL_BAND_M = 0.2
 # How fast the identified lag and dead time may move the model (s per s of flight).
 ADAPT_SLEW = 0.1
 ADAPT_DRAG_SLEW = 0.5  # 1/s per s
-DRAG_ESTIMATE_SLEW = 0.5  # 1/s per s: the initial candidate's settled drag, adopted on its own
-DRAG_LOG_STEP_1_S = 0.1  # ... reported as identified (lag and dead time unchanged) when it moved this much
 
 
 class InnerLoopCompensator:
@@ -232,26 +230,8 @@ class InnerLoopCompensator:
             self._target = best
             self.identified = IdentifiedModel(best[0], best[1], self.identifier.drag_1_s or 0.0, time_s)
         if self._target is None:
-            drag = self.identifier.drag_estimate_1_s
-            if drag is not None:
-                logged = self.model.drag_xy_1_s if self.identified is None else self.identified.drag_1_s
-                if abs(drag - logged) > DRAG_LOG_STEP_1_S:
-                    self.identified = IdentifiedModel(self.lag[0], self.delay_s, drag, time_s)  # logged (the pipeline)
-                cur, step = self.drag[0], DRAG_ESTIMATE_SLEW * (time_s - t_prev)
-                self._set_drag(cur + max(-step, min(step, drag - cur)), velocity)
             return
         self._move_to_target(time_s - t_prev, self._target, self.identifier.drag_1_s)
-
-    def _set_drag(self, drag: float, velocity: Vec) -> None:
-        """Move the horizontal drag to ``drag`` without a bump: the disturbance estimate takes over
-        what it had absorbed of the drag now modelled (``d += (drag - old) v``), so the modelled
-        acceleration is unchanged at this instant (the observer had already absorbed most of it:
-        adding the drag without the hand-over counts it twice until the observer unwinds)."""
-        delta = drag - self.drag[0]
-        dmax = self.max_disturbance_m_s2
-        d = [min(dmax, max(-dmax, self.disturbance[i] + delta * velocity[i])) for i in (0, 1)]
-        self.disturbance = (d[0], d[1], self.disturbance[2])
-        self.drag = (drag, drag, self.drag[2])
 
     def _move_to_target(self, dt: float, target: tuple[float, float], drag: float | None) -> None:
         """What an adoption does to the compensator: the lag, the dead time (every axis, held back
@@ -326,27 +306,14 @@ class InnerLoopCompensator:
             out.append(value)
         return (out[0], out[1], out[2])
 
-    def commit(self, time_s: float, setpoint: Vec, clip_thrust: Callable[[Vec], Vec], along: Vec | None = None,
-               interval: Callable[[Vec, Vec], tuple[float, float] | None] | None = None) -> Vec:  # fmt: skip
+    def commit(self, time_s: float, setpoint: Vec, clip_thrust: Callable[[Vec], Vec]) -> Vec:
         """The setpoint to send now for the inverted ``setpoint`` computed at ``time_s`` (ENU,
         gravity excluded): kept feasible by ``clip_thrust`` (a thrust vector, gravity included),
-        recorded, and — when a group is held back — the :meth:`outgoing` one, feasible too.
-
-        ``along`` (the path's unit tangent) with ``interval`` (``ThrustSet.line_interval``): an
-        infeasible setpoint first gives up acceleration along the path, keeping the transversal
-        part, as the law's own priority does (the inversion adds ``drag v - d`` and the lead after
-        the law's allocation; clipped uniformly, a turn's centripetal part was cut with it and real
-        PX4 drifted 23 cm outward at a racetrack's turn exit, tilt-saturated)."""
+        recorded, and — when a group is held back — the :meth:`outgoing` one, feasible too."""
         g = GRAVITY_M_S2
 
         def feasible(a: Vec) -> Vec:
-            f = (a[0], a[1], a[2] + g)
-            if along is not None and interval is not None:
-                iv = interval(f, along)
-                if iv is not None and not (iv[0] <= 0.0 <= iv[1]):
-                    k = iv[0] if iv[0] > 0.0 else iv[1]
-                    f = (f[0] + k * along[0], f[1] + k * along[1], f[2] + k * along[2])
-            fc = clip_thrust(f)
+            fc = clip_thrust((a[0], a[1], a[2] + g))
             return (fc[0], fc[1], fc[2] - g)
 
         sent = feasible(setpoint)

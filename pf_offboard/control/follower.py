@@ -599,7 +599,7 @@ class PathFollower:
             # setpoint, and omega_ff on top of it would lead twice
             sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v)
             # feasible, recorded, and the faster axis group's held back (InnerLoopCompensator.horizon_s)
-            ax, ay, az = comp.commit(t_s, sp, law.thrust_set.clip, tan, law.thrust_set.line_interval)
+            ax, ay, az = comp.commit(t_s, sp, law.thrust_set.clip)
             jerk_rates: Vec = (0.0, 0.0, 0.0)
         elif self.feedforward == "any_state":  # refused with a compensator (constructor)
             jerk_rates = self._closed_loop_jerk(y, v, lam, terms, res.accel, offsets)

@@ -49,16 +49,6 @@ class BatchIdentifier:
         self._t: float | None = None
         self.data_s = 0.0
         self.active = np.full(n, -1, dtype=np.int64)
-        self._drag_mean = np.full(n, math.nan)  # the scalar's None: NaN
-        self._drag_var = np.zeros(n)
-        self._drag_s = np.zeros(n)
-
-    @property
-    def drag_estimate_1_s(self) -> Arr:
-        """:attr:`ResponseIdentifier.drag_estimate_1_s` per flight (NaN: the scalar's None)."""
-        settled = (self.active < 0) & ~np.isnan(self._drag_mean) & (self._drag_s >= A.DRAG_SETTLE_S)
-        settled &= self._drag_var <= A.DRAG_MAX_STD_1_S * A.DRAG_MAX_STD_1_S
-        return np.where(settled, self._drag_mean, math.nan)
 
     @property
     def drag_1_s(self) -> Arr:
@@ -110,16 +100,6 @@ class BatchIdentifier:
                 d[1] = d[1] + l2 * ey
                 score[k] = score[k] + c * (ex * ex + ey * ey - score[k])
         self.data_s += dt
-        if self.data_s >= A.MIN_DATA_S:
-            fast = vx * vx + vy * vy >= A.DRAG_MIN_SPEED_M_S * A.DRAG_MIN_SPEED_M_S
-            x = self._drag[self.initial_index]
-            first = fast & np.isnan(self._drag_mean)
-            more = fast & ~first
-            cm = min(1.0, dt / A.DRAG_MEAN_S)
-            dev = x - self._drag_mean
-            self._drag_mean = np.where(first, x, np.where(more, self._drag_mean + cm * dev, self._drag_mean))
-            self._drag_var = np.where(more, self._drag_var + cm * (dev * dev - self._drag_var), self._drag_var)
-            self._drag_s = np.where(fast, self._drag_s + dt, self._drag_s)
         if self.data_s < A.MIN_DATA_S:
             return None
         best = np.argmin(score, axis=0)  # the first of equal scores, as min(range, key=)

@@ -17,8 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard.control import follower as F
-from pf_offboard.control.compensator import (ADAPT_DRAG_SLEW, ADAPT_SLEW, DRAG_ESTIMATE_SLEW, DRAG_LOG_STEP_1_S,
-                                             MAX_GAP_S, OFFSET_INTEGRAL_BAND_M)
+from pf_offboard.control.compensator import ADAPT_DRAG_SLEW, ADAPT_SLEW, MAX_GAP_S, OFFSET_INTEGRAL_BAND_M
 from pf_offboard.control.types import GRAVITY_M_S2
 from pf_offboard.sim.batch.adaptive import BatchIdentifier
 from pf_offboard.sim.batch.geometry import BatchPath, atan2, power
@@ -355,26 +354,6 @@ class _Compensator:
         rows = ~np.isnan(self._target[0])
         if rows.any():
             self._move_to_target(time_s - t_prev, rows, self._target, self.identifier.drag_1_s)
-        drag = self.identifier.drag_estimate_1_s
-        free = ~rows & ~np.isnan(drag)
-        if free.any():
-            logged = np.where(np.isnan(self._identified[2]), self.c.model.drag_xy_1_s, self._identified[2])
-            log = free & (np.abs(drag - logged) > DRAG_LOG_STEP_1_S)
-            if log.any():
-                new = (self.lag[0], self.horizon_s, drag, np.full(self.n, time_s))
-                self._identified = tuple(np.where(log, x, old) for x, old in zip(new, self._identified))
-            cur, step = self.drag[0], DRAG_ESTIMATE_SLEW * (time_s - t_prev)
-            self._set_drag(free, cur + np.maximum(-step, np.minimum(step, drag - cur)), velocity)
-
-    def _set_drag(self, rows: Mask, drag: Arr, velocity: V) -> None:
-        """``InnerLoopCompensator._set_drag`` for the flights ``rows``."""
-        delta = drag - self.drag[0]
-        dmax = self.max_disturbance_m_s2
-        d = [np.where(rows, np.minimum(dmax, np.maximum(-dmax, self.disturbance[i] + delta * velocity[i])), self.disturbance[i])
-             for i in (0, 1)]  # fmt: skip
-        self.disturbance = (d[0], d[1], self.disturbance[2])
-        new = np.where(rows, drag, self.drag[0])
-        self.drag = (new, new, self.drag[2])
 
     def _move_to_target(self, dt: float, rows: Mask, target: tuple[Arr, Arr], drag: Arr) -> None:
         """``InnerLoopCompensator._move_to_target`` for the flights ``rows`` (drag NaN: none)."""
@@ -436,17 +415,9 @@ class _Compensator:
             out.append(value)
         return (out[0], out[1], out[2])
 
-    def commit(self, time_s: float, setpoint: V, clip: Any, along: V | None = None, interval: Any = None) -> V:
-        """``InnerLoopCompensator.commit`` (``interval``: ``BatchThrustSet.line_interval``)."""
+    def commit(self, time_s: float, setpoint: V, clip: Any) -> V:
         def feasible(a: V) -> V:
-            f = (a[0], a[1], a[2] + G)
-            if along is not None and interval is not None:
-                lo, hi, empty = interval(f, along)
-                move = ~empty & ~((lo <= 0.0) & (0.0 <= hi))
-                if move.any():
-                    k = np.where(move, np.where(lo > 0.0, lo, hi), 0.0)
-                    f = tuple(np.where(move, f[i] + k * along[i], f[i]) for i in range(3))  # type: ignore[assignment]
-            fc = clip(f)
+            fc = clip((a[0], a[1], a[2] + G))
             return (fc[0], fc[1], fc[2] - G)
 
         sent = feasible(setpoint)
@@ -697,7 +668,7 @@ class BatchFollower:
             jerk = self._onpath_jerk(eta2_ref, deta2, ddeta2, w, tan, s_ss, s_sss)
             if comp is not None:
                 sp = comp.invert(comp.lead((ax, ay, az), jerk), v)
-                ax, ay, az = comp.commit(t_s, sp, law.thrust_set.clip, tan, law.thrust_set.line_interval)
+                ax, ay, az = comp.commit(t_s, sp, law.thrust_set.clip)
                 zero = np.zeros_like(ax)
                 jerk_rates: V = (zero, zero, zero)
             else:
