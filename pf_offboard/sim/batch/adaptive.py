@@ -32,6 +32,8 @@ class BatchIdentifier:
         self.lags = scalar.lags
         self.initial_index = scalar.initial_index
         self.max_delay_s = scalar.max_delay_s
+        self.barred = np.ones(len(self.delays) * len(self.lags), dtype=bool)  # never adopted (scalar.allowed)
+        self.barred[list(scalar.allowed)] = False
         self.n = n
         nl = len(self.lags)
         k = len(self.delays) * nl
@@ -102,7 +104,7 @@ class BatchIdentifier:
         self.data_s += dt
         if self.data_s < A.MIN_DATA_S:
             return None
-        best = np.argmin(score, axis=0)  # the first of equal scores, as min(range, key=)
+        best = np.argmin(np.where(self.barred[:, None], np.inf, score), axis=0)  # the first of equal scores, as min(allowed, key=)
         rows = np.arange(self.n)
         none = self.active < 0
         current = np.where(none, self.initial_index, self.active)
