@@ -47,6 +47,19 @@ def time_boot_ms(est: StateEstimate) -> int:
     return int(round(est.time_s * 1000.0)) & 0xFFFFFFFF
 
 
+def fit_identification_to_output(follower: Any, output_mode: str, profile: Any, time_constant_s: float) -> None:
+    """Tell the follower's in-flight identification what the output adds to the inner loop: an
+    autopilot that flies the ``rates`` output through its own attitude target
+    (``Profile.rates_through_attitude_target``: ArduCopter), under the app's attitude loop
+    (``time_constant_s``), answers with a longer lag and a shorter dead time than the model's: the
+    identifier may then adopt a longer lag (``InnerLoopCompensator.identify_lags_up_to``). Used by
+    :class:`Pipeline` and the batch engine alike."""
+    comp = getattr(follower, "compensator", None)
+    if (output_mode == "rates" and getattr(profile, "rates_through_attitude_target", False)
+            and comp is not None and hasattr(comp, "identify_lags_up_to")):  # fmt: skip
+        comp.identify_lags_up_to(time_constant_s)
+
+
 class Pipeline:
     """Estimator → core → encoder, stepped once per fresh state sample.
 
@@ -59,6 +72,7 @@ class Pipeline:
     def __init__(self, follower: Any, encoder: Encoder, estimator: Estimator | None = None) -> None:
         self.follower = follower
         self.encoder = encoder
+        fit_identification_to_output(follower, encoder.output_mode, encoder.profile, encoder.time_constant_s)
         self.estimator = estimator if estimator is not None else Estimator()
         self._stepped_sample = 0
         self.replaced_steps = 0  # steps where the safe hold was sent instead of the command

@@ -75,6 +75,12 @@ class Profile:
     # attitude / rates: the parameter that, at 1, makes the autopilot divide the thrust sent by
     # cos(target tilt) (ArduPilot's ATC_ANGLE_BOOST, default 1), or None (PX4 flies the thrust as sent)
     thrust_angle_boost_param: str | None = None
+    # rates: the autopilot integrates the body rates sent into its own attitude target and closes
+    # its attitude loop on it (ArduCopter, AC_AttitudeControl::input_rate_bf_roll_pitch_yaw_rads),
+    # so under the app's attitude loop the response is a longer lag with a short dead time; the
+    # in-flight identification may then adopt a lag up to 1.5 x the model's (app.pipeline). PX4
+    # tracks the rates directly.
+    rates_through_attitude_target: bool = False
     # HEARTBEAT custom_mode bits that identify our mode (PX4: the main mode only; it leaves the
     # sub mode 0 in OFFBOARD)
     offboard_mode_mask: int = 0xFFFFFFFF
@@ -189,6 +195,7 @@ ARDUPILOT = Profile(
     attitude_rates_ff=(True, True, True),
     accel_with_velocity=True,
     thrust_angle_boost_param="ATC_ANGLE_BOOST",
+    rates_through_attitude_target=True,
     guid_options=(("attitude", 8), ("rates", 8), ("acceleration", 16)),
     refused_outputs=(("acceleration", _ARDUPILOT_ACCELERATION_REFUSAL),),
     mode_names=ardupilot_mode_name,

@@ -50,16 +50,23 @@ class ResponseIdentifier:
     """A bank of first-order-lag + dead-time models of the horizontal acceleration response."""
 
     def __init__(self, gain_xy: float = 1.0, delays_s: Sequence[float] = DELAYS_S, lags_s: Sequence[float] = LAGS_S,
-                 initial: tuple[float, float] = (0.1, 0.1)) -> None:  # fmt: skip
+                 initial: tuple[float, float] = (0.1, 0.1), min_long_lag_delay_s: float = 0.0,
+                 max_long_lag_response_s: float = math.inf) -> None:  # fmt: skip
         """``initial``: the (lag, delay) the compensator starts with (a candidate is added for it):
         another candidate is adopted only when it explains the flight clearly better
-        (ADOPT_RATIO of its score)."""
+        (ADOPT_RATIO of its score). A candidate whose lag is longer than the initial one is adopted
+        only with a delay of at least ``min_long_lag_delay_s`` and a lag + delay of at most
+        ``max_long_lag_response_s`` (the others are scored all the same)."""
         self.gain = gain_xy
         self.delays = tuple(sorted({float(d) for d in delays_s} | {float(initial[1])}))
         self.lags = tuple(sorted({float(x) for x in lags_s} | {float(initial[0])}))
         nl = len(self.lags)
         self.initial_index = self.delays.index(float(initial[1])) * nl + self.lags.index(float(initial[0]))
         self.max_delay_s = max(self.delays)
+        lag0, floor, ceiling = float(initial[0]), float(min_long_lag_delay_s) - 1e-9, float(max_long_lag_response_s) + 1e-9
+        self.allowed = tuple(k for k in range(len(self.delays) * nl)  # the candidates that may be adopted
+                             if self.lags[k % nl] <= lag0
+                             or floor <= self.delays[k // nl] <= ceiling - self.lags[k % nl])  # fmt: skip
         self.reset()
 
     def reset(self) -> None:
@@ -129,7 +136,7 @@ class ResponseIdentifier:
         self.data_s += dt
         if self.data_s < MIN_DATA_S:
             return None
-        best = min(range(len(self.score)), key=self.score.__getitem__)
+        best = min(self.allowed, key=self.score.__getitem__)
         current = self.initial_index if self.active is None else self.active
         ratio = ADOPT_RATIO if self.active is None else SWITCH_RATIO
         if best != current and self.score[best] < ratio * self.score[current]:

@@ -36,7 +36,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 
-from pf_offboard.control.adaptive import DELAYS_S, IdentifiedModel, ResponseIdentifier
+from pf_offboard.control.adaptive import DELAYS_S, LAGS_S, IdentifiedModel, ResponseIdentifier
 from pf_offboard.control.types import GRAVITY_M_S2, Compensation, VehicleModel
 from pf_offboard.errors import InputError
 
@@ -55,6 +55,16 @@ OFFSET_INTEGRAL_BAND_M = 0.2
 # How fast the identified lag and dead time may move the model (s per s of flight).
 ADAPT_SLEW = 0.1
 ADAPT_DRAG_SLEW = 0.5  # 1/s per s
+# identify_lags_up_to: a lag longer than the model's, up to LONG_LAG_MAX_FACTOR x it, is adopted
+# only with a dead time of at least LONG_LAG_MIN_DELAY_S and a response (lag + dead time) at most
+# LONG_LAG_RESPONSE_SLACK_S longer than the model's: 0.15 s with 0.06-0.08 s. Real ArduCopter SITL's
+# rates output fits lag 0.15 s + dead time 0.04-0.06 s: adopting lag 0.2 s with no dead time
+# diverged there at once (thrust axis 44 deg off, BRAKE), 0.15 + 0.04 s flew 5.3 cm/s, 0.15 + 0.06 s
+# 2.6 cm/s; 0.15 + 0.04 s flew the arducopter mock (0.15 + 0.08 s) at 11 cm, and 0.15 + 0.1 s its
+# slower airframes worse than the plain bank (docs/design-decisions.md)
+LONG_LAG_MIN_DELAY_S = 0.06
+LONG_LAG_MAX_FACTOR = 1.5
+LONG_LAG_RESPONSE_SLACK_S = 0.03
 
 
 class InnerLoopCompensator:
@@ -119,6 +129,27 @@ class InnerLoopCompensator:
         self.max_speed_offset_m_s = float(max_speed_offset_m_s)
         self.max_position_offset_m = float(max_position_offset_m)
         self.reset()
+
+    def identify_lags_up_to(self, lag_s: float) -> None:
+        """Let the identifier also adopt a longer lag than the model's: up to ``lag_s`` (s; the
+        app's ``rates`` output over ArduCopter passes its attitude loop's time constant) and
+        LONG_LAG_MAX_FACTOR x the model's, with a dead time of at least LONG_LAG_MIN_DELAY_S (at
+        most the model's) and a response at most LONG_LAG_RESPONSE_SLACK_S longer than the
+        model's. Real ArduCopter SITL's rates output answers like lag 0.15 s + dead time
+        0.04-0.06 s, which the model's lag with any shorter dead time cannot
+        describe: the bank adopted late (figure-eight, 25 s) or nothing. Before an adoption only."""
+        if self.identifier is None or self.identified is not None or not math.isfinite(lag_s):
+            return
+        base = self.model.accel_lag_xy_s
+        longest = min(lag_s, LONG_LAG_MAX_FACTOR * base) + 1e-9
+        lags = [base] + [x for x in LAGS_S if base < x <= longest]
+        if len(lags) == 1:
+            return
+        old = self.identifier
+        self.identifier = ResponseIdentifier(old.gain, delays_s=old.delays, lags_s=lags,
+                                             initial=(base, self.delay_s),
+                                             min_long_lag_delay_s=LONG_LAG_MIN_DELAY_S,
+                                             max_long_lag_response_s=base + self.delay_s + LONG_LAG_RESPONSE_SLACK_S)  # fmt: skip
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:

@@ -8,7 +8,7 @@ import pytest
 from pf_offboard.app.encoders import Encoder
 from pf_offboard.app.estimator import Estimator
 from pf_offboard.app.pipeline import Pipeline
-from pf_offboard.app.profiles import PX4
+from pf_offboard.app.profiles import ARDUPILOT, PX4
 
 from .helpers import attitude_quaternion, command, local_position, odometry
 
@@ -101,3 +101,18 @@ def test_core_failure_sends_hold_and_logs_it() -> None:
     assert math.isnan(step.record.thrust_cmd_m_s2) and "hold" in step.record.event
     assert all(math.isfinite(getattr(step.setpoint, n)) for n in ("afx", "afy", "afz", "yaw"))
     assert pipe.replaced_steps == 1
+
+
+@pytest.mark.parametrize(("profile", "mode", "lags"), [
+    (ARDUPILOT, "rates", (0.1, 0.15)), (ARDUPILOT, "attitude", (0.1,)), (PX4, "rates", (0.1,)), (PX4, "attitude", (0.1,)),
+])  # fmt: skip
+def test_the_rates_output_through_an_attitude_target_lets_the_identifier_adopt_a_longer_lag(profile, mode, lags) -> None:
+    """ArduCopter flies body rates through its own attitude target (Profile.rates_through_attitude_target):
+    under the app's attitude loop the response is a longer lag, which the identifier may then adopt
+    (closed loop: tests/sim/test_rates_identification.py)."""
+    from pf_offboard import Path, PathFollower
+
+    follower = PathFollower(Path.from_waypoints([(0, 0, 2), (2, 0, 2), (2, 2, 2), (0, 2, 2)], closed=True), 1.0)
+    Pipeline(follower, Encoder(mode, profile, 1, 1, hover_thrust=0.5))
+    assert follower.compensator is not None and follower.compensator.identifier is not None
+    assert follower.compensator.identifier.lags == lags

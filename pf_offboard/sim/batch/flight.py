@@ -52,6 +52,7 @@ class _Setup:
         from sitl_mock.dynamics import preset
 
         from pf_offboard.app.fly import flight_settings
+        from pf_offboard.app.pipeline import fit_identification_to_output
         from pf_offboard.app.profiles import PROFILES
         from pf_offboard.config import load_config
         from pf_offboard.control import PathFollower, controller_from_config
@@ -69,6 +70,7 @@ class _Setup:
         self.follower = controller_from_config(config)
         self.is_follower = isinstance(self.follower, PathFollower)
         self.profile = PROFILES[settings.autopilot]
+        fit_identification_to_output(self.follower, fs.output_mode, self.profile, fs.attitude_time_constant_s)
         self.vehicle = preset(settings.vehicle)
         self.settings = settings
         tilt_param = 1.0 if self.vehicle.accel_decouple else 0.0  # MPC_ACC_DECOUPLE as the mock reports it

@@ -106,3 +106,24 @@ def test_the_engines_give_the_same_table_for_a_gain_sweep_and_unmirrored_flights
     batch = execute([*tasks, *other], engine="batch")
     assert rows_equal(batch, execute([*tasks, *other], engine="scalar"))
     assert len({r["gains_id"] for r in batch}) == 4
+
+
+def test_a_rates_flight_on_arducopter_that_adopts_a_longer_lag_follows_the_scalar_one() -> None:
+    """The rates output over ArduCopter lets the bank adopt a longer lag (app.pipeline.fit_identification_to_output,
+    applied by the batch engine's setup too): both engines adopt the same one at the same time."""
+    settings = FlightSettings(vehicle="arducopter", autopilot="ardupilot", duration_s=10.0, settle_s=3.0, output_mode="rates")
+    figure8 = ROOT / "tests" / "real_sitl" / "configs" / "figure8-tilted.yaml"
+    tasks = plan.tasks(figure8, plan.SweepSpec(flights=1, seed=2, settings=settings))
+    trace: list[np.ndarray] = []
+    followers: list = []
+    rows, redo = fly(tasks, trace, followers)
+    assert not redo
+    found = followers[0].compensator.identified()
+    scalar_followers: list = []
+    scalar = _scalar_trajectory(tasks[0], scalar_followers)
+    worst = float(np.max(np.abs(scalar - np.array(trace)[: len(scalar), :, 0])))
+    assert worst <= 1e-6, worst
+    model = scalar_followers[0].compensator.identified
+    assert model is not None and model.lag_s == 0.15 and 0.06 <= model.delay_s <= 0.08
+    for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s"):
+        assert abs(getattr(model, key) - float(found[key][0])) <= 1e-9, key
