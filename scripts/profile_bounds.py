@@ -36,7 +36,7 @@ def main() -> None:
     share = response_share(spec.accel_share, r)
 
     def line(label: str, t: float) -> None:
-        print(f"  {label:58s} {t:6.2f} s  {L / t:5.2f} m/s")
+        print(f"  {label:64s} {t:6.2f} s  {L / t:5.2f} m/s")
 
     print(f"{args.config}: {L:.2f} m, {'closed' if path.closed else 'open'}, max {spec.max_speed_m_s:g} m/s, "
           f"share {spec.accel_share:g} x inner loop ({r:.2f} s) = {share:.3f}, tilt {lim.max_tilt_deg:g} deg, "
@@ -54,6 +54,19 @@ def main() -> None:
                       ("accel_share 1", {"accel_share": 1.0})):  # fmt: skip
         s2 = dataclasses.replace(spec, **kw)
         line(f"planned, {label}", SpeedProfile(path, s2, lim, direction, r).stats.travel_time_s)
+    # each bound relaxed in turn to (about) no bound, then every bound but the share relaxed, then
+    # the share at its whole (ideal inner loop) with each other bound relaxed in turn
+    free = {"jerk": {"max_tangential_jerk_m_s3": 1000.0, "max_body_rate_rad_s": 20.0},
+            "body rate": {"max_body_rate_rad_s": 20.0},
+            "tangential accel": {"max_tangential_accel_m_s2": 50.0}}
+    print("  each bound relaxed in turn (jerk: with the body rate too, which caps the jerk planned):")
+    for share_label, share_kw, resp in (("at the profile's share", {}, r), ("at the whole share (1, ideal loop)", {"accel_share": 1.0}, 0.0)):
+        line(f"{share_label}: all bounds", SpeedProfile(path, dataclasses.replace(spec, **share_kw), lim, direction, resp).stats.travel_time_s)
+        for label, kw in free.items():
+            s2 = dataclasses.replace(spec, **share_kw, **kw)
+            line(f"{share_label}: no {label} bound", SpeedProfile(path, s2, lim, direction, resp).stats.travel_time_s)
+        s2 = dataclasses.replace(spec, **share_kw, **free["jerk"], **free["tangential accel"])
+        line(f"{share_label}: none but the share", SpeedProfile(path, s2, lim, direction, resp).stats.travel_time_s)
     # which constraint is active where (travel order, as the profile's grid)
     geo = _geometry(path, spec, direction)
     feas = _Feasible(geo, lim, spec, r)
@@ -68,6 +81,12 @@ def main() -> None:
     classes = {"max speed / table": near(geo.cap_b), "thrust set (share of the limits)": near(ub),
                "point-mass passes (accel / braking)": near(pm), "body rate": rate >= 0.97 * spec.max_body_rate_rad_s}  # fmt: skip
     left = moving.copy()
+    a_t = np.gradient(b, geo.ds) / 2.0
+    f = geo.s_ss * b[:, None] + geo.t_dir * a_t[:, None]
+    f[:, 2] += 9.80665
+    tilt = np.degrees(np.arctan2(np.linalg.norm(f[:, :2], axis=1), f[:, 2]))
+    print(f"  planned reference tilt: max {tilt.max():.1f} deg, time-weighted mean {np.sum(tilt * dt) / dt.sum():.1f} deg "
+          f"(limit {lim.max_tilt_deg:g}); max tilt rate {prof.stats.max_tilt_rate_rad_s:.2f} rad/s")
     print("  time share, active constraint (first that holds):")
     for name, m in classes.items():
         m = m & left
