@@ -108,7 +108,7 @@ def test_the_engines_give_the_same_table_for_a_gain_sweep_and_unmirrored_flights
     assert len({r["gains_id"] for r in batch}) == 4
 
 
-def test_a_rates_flight_on_arducopter_that_adopts_a_longer_lag_follows_the_scalar_one() -> None:
+def test_a_rates_flight_on_arducopter_that_adopts_a_longer_lag_follows_the_scalar_one(scalar_flight) -> None:
     """The rates output over ArduCopter lets the bank adopt a longer lag (app.pipeline.fit_identification_to_output,
     applied by the batch engine's setup too): both engines adopt the same one at the same time."""
     settings = FlightSettings(vehicle="arducopter", autopilot="ardupilot", duration_s=10.0, settle_s=3.0, output_mode="rates")
@@ -120,7 +120,7 @@ def test_a_rates_flight_on_arducopter_that_adopts_a_longer_lag_follows_the_scala
     assert not redo
     found = followers[0].compensator.identified()
     scalar_followers: list = []
-    scalar = _scalar_trajectory(tasks[0], scalar_followers)
+    scalar, _ = scalar_flight(tasks[0], scalar_followers)
     worst = float(np.max(np.abs(scalar - np.array(trace)[: len(scalar), :, 0])))
     assert worst <= 1e-6, worst
     model = scalar_followers[0].compensator.identified
