@@ -36,11 +36,31 @@ def _hang_guard() -> Iterator[None]:
 
 
 # The suite's longest files (a minute or so each on 2 cores, measured with --durations), collected
-# first so that `pytest -n auto --dist loadfile` starts them first instead of leaving one worker
-# running them alone at the end. Order only: every test still runs, each file on one worker.
+# first so that `pytest -n auto --dist loadgroup` starts them first instead of leaving one worker
+# running them alone at the end. Order only: every test still runs.
 LONG_FILES = ("test_getting_started.py", "test_installed.py", "test_cli_fuzz.py", "test_jitter_rates.py", "test_link_faults.py")
+# The tests that open the fixed ports of the docs (UDP 14540 / 14580, TCP 5760): one group, so
+# that `--dist loadgroup` runs them one after the other on one worker (they would collide).
+FIXED_PORT_TESTS = ("tests/test_getting_started.py::test_every_command_of_the_guide_runs",
+                    "tests/api/test_api.py::test_the_snippet_with_the_mavsdk_url_flies_end_to_end")  # fmt: skip
+_WIDE_SCOPES = ("class", "module", "package")
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The order above, and the groups of `--dist loadgroup` (a test without a group is a work
+    unit of its own, so one long file no longer holds one worker): the fixed-port tests form one
+    group; a test using a class / module scoped fixture (the installed wheel, a fitted log) is
+    grouped with its file, so that fixture is still built once."""
     rank = {name: i for i, name in enumerate(LONG_FILES)}
     items.sort(key=lambda item: rank.get(item.path.name, len(LONG_FILES)))  # stable: the rest keep their order
+    for item in items:
+        if item.get_closest_marker("xdist_group") is not None:
+            continue
+        if item.nodeid in FIXED_PORT_TESTS:
+            item.add_marker(pytest.mark.xdist_group("fixed_ports"))
+            continue
+        info = getattr(item, "_fixtureinfo", None)
+        defs = info.name2fixturedefs.values() if info is not None else ()
+        if any(d.scope in _WIDE_SCOPES for chain in defs for d in chain):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
