@@ -256,6 +256,9 @@ class MockConfig:
     wind_gust_time_constant_s: float = 2.0
     # External pushes (sitl_mock.dynamics.Push: start, duration, specific force NED m/s^2).
     pushes: tuple[Push, ...] = ()
+    # Parameter values at start, as (name, value) pairs (like PX4_PARAM_NAME=value or a parameter
+    # file): e.g. (("MPC_TILTMAX_AIR", 30.0),) clips the acceleration path at 30 deg.
+    params: tuple[tuple[str, float], ...] = ()
     # MAVLink 2 signing key file (32 raw bytes, 64 hex digits or a passphrase; sitl_mock.signing):
     # sign everything sent, drop unsigned / wrongly signed frames. None: no signing.
     signing_key_file: str | None = None
