@@ -287,6 +287,10 @@ class MockConfig:
         if not (math.isfinite(self.wind_gust_time_constant_s) and 0.05 <= self.wind_gust_time_constant_s <= 600.0):
             raise MockConfigError("wind_gust_time_constant_s",
                                   f"must be in [0.05, 600] s, got {self.wind_gust_time_constant_s}")
+        known = {spec.name for spec in PROFILES[self.profile].params}
+        for i, item in enumerate(self.params):
+            if not (isinstance(item, tuple) and len(item) == 2 and item[0] in known and math.isfinite(float(item[1]))):
+                raise MockConfigError(f"params[{i}]", f"expected (a {self.profile} parameter name, a finite value), got {item!r}")
         for i, push in enumerate(self.pushes):
             if not isinstance(push, Push):
                 raise MockConfigError(f"pushes[{i}]", f"expected a sitl_mock.dynamics.Push, got {push!r}")

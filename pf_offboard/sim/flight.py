@@ -555,7 +555,10 @@ class SimFlight:
 
         crashed = bool(self.autopilot.truth.crashed)
         if self.write_logs:
-            write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim"), paths.tlog.parent)
+            limits = getattr(self.pipeline.follower, "limits", None)
+            tilt = None if limits is None else float(limits.max_tilt_deg)
+            write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim", tilt_limit_deg=tilt),
+                         paths.tlog.parent)  # fmt: skip
         return SimResult(
             paths=paths,
             summary=summary,

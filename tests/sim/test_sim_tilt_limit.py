@@ -9,6 +9,7 @@ planned for 30 deg, 4.6 cm (max 10), at a lower planned speed (lap 7.7 s against
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +58,7 @@ def test_sim_plans_within_mpc_tiltmax_air_and_tracks_better_than_planning_into_t
           f"{100 * np.abs(ct30).max():.1f} cm, 45 into a 30 clip {100 * _rms(ct_clip):.1f} / {100 * np.abs(ct_clip).max():.1f} cm; "
           f"speed error RMS {100 * _rms(err45):.1f} / {100 * _rms(err30):.1f} / {100 * _rms(err_clip):.1f} cm/s")  # fmt: skip
     assert r30.reason == "3 laps done"
+    assert json.loads((r30.paths.tlog.parent / "summary.json").read_text())["tilt_limit_deg"] == 30.0
     assert follower45.limits.max_tilt_deg == 45.0 and clipped.limits.max_tilt_deg == 45.0
     assert follower30.limits.max_tilt_deg == 30.0 and follower30.law.limits.max_tilt_deg == 30.0
     # the plan uses at most its share of the 30 deg thrust set (g e_z + a_ref / share within 30 deg),
