@@ -14,6 +14,8 @@ def config_to_args(config: MockConfig) -> list[str]:
             "--home=" + ",".join(repr(v) for v in (c.home_lat_deg, c.home_lon_deg, c.home_alt_m))]  # "=": a south latitude starts with "-"
     if any(v != 0.0 for v in c.wind_ned_m_s):
         args += ["--wind", ",".join(repr(float(v)) for v in c.wind_ned_m_s)]
+    for name, value in c.params:
+        args += ["--param", f"{name}={float(value)!r}"]
     if c.wind_gust_std_m_s > 0.0:
         args += ["--wind-gusts", f"{c.wind_gust_std_m_s!r},{c.wind_gust_time_constant_s!r}"]
     if c.udp_local_port is None:

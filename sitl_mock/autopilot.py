@@ -23,7 +23,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_mock import telemetry
-from sitl_mock.config import MockConfig
+from sitl_mock.config import MockConfig, MockConfigError
 
 MAX_LOG_EVENTS = 10_000
 from sitl_mock.control import (
@@ -48,6 +48,7 @@ from sitl_mock.dynamics import (
 from sitl_mock.profiles import (
     ACCEL_DECOUPLE_PARAM,
     PROFILES,
+    TILT_LIMIT_PARAMS,
     Behaviour,
     ModeSpec,
     ParamType,
@@ -95,6 +96,20 @@ class LogEvent:
     text: str
 
 
+def tilt_limit_params(profile: str, vehicle: Any) -> dict[str, float]:
+    """The tilt limit parameters a ``profile`` mock reports for ``vehicle`` (before any PARAM_SET),
+    as they arrive over MAVLink: the first of the profile's non-zero ones carries the vehicle's
+    ``tilt_max_rad`` (PX4 MPC_TILTMAX_AIR deg as float32; ArduPilot ANGLE_MAX cdeg, PSC_ANGLE_MAX 0)."""
+    specs = [spec for spec in PROFILES[profile].params if spec.name in TILT_LIMIT_PARAMS]
+    out = {spec.name: float(spec.default) for spec in specs}
+    for spec in specs:
+        if spec.default != 0.0:
+            value = math.degrees(vehicle.tilt_max_rad) / TILT_LIMIT_PARAMS[spec.name]
+            out[spec.name] = float(round(value)) if spec.kind is ParamType.INT32 else float(np.float32(value))
+            break
+    return out
+
+
 class Autopilot:
     """PX4- or ArduPilot-like autopilot around a :class:`sitl_mock.dynamics.Simulator`."""
 
@@ -111,6 +126,7 @@ class Autopilot:
         self.params[self.profile.hover_param] = vehicle.hover_thrust
         if ACCEL_DECOUPLE_PARAM in self.params:
             self.params[ACCEL_DECOUPLE_PARAM] = 1.0 if vehicle.accel_decouple else 0.0
+        self.params.update(tilt_limit_params(config.profile, vehicle))
         spawn = config.spawn
         if spawn.kind == "hover":
             dyn_spawn = Spawn.hover(spawn.position_ned_m)
@@ -119,6 +135,9 @@ class Autopilot:
         else:
             dyn_spawn = Spawn.ground(spawn.position_ned_m)
         self.sim = Simulator(vehicle, rng_dyn, dyn_spawn, wind=config.wind())
+        for name, value in config.params:  # like PX4_PARAM_* / a parameter file: before anything flies
+            if name not in self.params or not self._set_param(name, float(value)):
+                raise MockConfigError("params", f"{name} = {value!r} unknown to the {config.profile} mock or out of its range")
         for push in config.pushes:
             self.sim.add_push(push)
         self.truth: VehicleState = self.sim.state()
@@ -475,17 +494,41 @@ class Autopilot:
             return [(None, self._param_value(name))]  # rejected: report the unchanged value
         if kind is ParamType.INT32:
             value = float(int(value))
+        self._set_param(name, value)
+        return [(None, self._param_value(name))]
+
+    def _set_param(self, name: str, value: float) -> bool:
+        """Set a known parameter (INT32 already truncated); False (unchanged) when refused."""
+        if not math.isfinite(value):
+            return False
+        if self._param_kinds[name] is ParamType.INT32:
+            value = float(int(value))
         if name == self.profile.hover_param:
             if not 0.05 <= value <= 0.95:
-                return [(None, self._param_value(name))]
+                return False
             # The acceleration mapping uses the autopilot's parameter, as PX4/ArduPilot do.
             self.sim.params = self.sim.params.with_(hover_thrust=value)
         if name == ACCEL_DECOUPLE_PARAM:
             if value not in (0.0, 1.0):
-                return [(None, self._param_value(name))]
+                return False
             self.sim.params = self.sim.params.with_(accel_decouple=value == 1.0)
+        if name in TILT_LIMIT_PARAMS:
+            deg = value * TILT_LIMIT_PARAMS[name]
+            if not 0.0 <= deg < 90.0 or (deg == 0.0 and name != "PSC_ANGLE_MAX"):
+                return False
+            self.params[name] = value
+            self.sim.params = self.sim.params.with_(tilt_max_rad=math.radians(self._tilt_limit_deg()))
         self.params[name] = value
-        return [(None, self._param_value(name))]
+        return True
+
+    def _tilt_limit_deg(self) -> float:
+        """The acceleration path's tilt limit from the parameters: the first positive one rules
+        (PX4 MPC_TILTMAX_AIR; ArduPilot PSC_ANGLE_MAX, else ANGLE_MAX)."""
+        for name, deg_per_unit in TILT_LIMIT_PARAMS.items():
+            value = self.params.get(name, 0.0)
+            if value > 0.0:
+                return value * deg_per_unit
+        return math.degrees(self.sim.params.tilt_max_rad)
 
     # --- commands -----------------------------------------------------------------------------
     def _on_command(self, msg: mavlink.MAVLink_message, link: int) -> list[Out]:

@@ -69,6 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="constant wind, world NED m/s (air velocity: 3,0 blows toward north at 3 m/s; VD default 0)")
     p.add_argument("--wind-gusts", metavar="STD[,TAU]",
                    help="random gusts on top of --wind: std m/s per axis, time constant s (default 2); seeded by --seed")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="a parameter's value at start (repeatable), like PX4_PARAM_NAME=VALUE: e.g. MPC_TILTMAX_AIR=30")
     link = p.add_argument_group("transports (default: px4 → UDP 14580→14540, ardupilot → TCP 5760)")
     link.add_argument("--udp-local", type=int, metavar="PORT", help="bind UDP on 127.0.0.1:PORT (0 = ephemeral)")
     link.add_argument("--udp-remote", metavar="HOST:PORT",
@@ -207,6 +209,16 @@ def config_from_args(args: argparse.Namespace) -> MockConfig:
         if not (abs(lat) <= 90.0 and abs(lon) <= 180.0 and -1000.0 <= alt <= 10000.0):
             raise MockConfigError("--home", f"need LAT in [-90, 90] deg, LON in [-180, 180] deg, ALT in [-1000, 10000] m AMSL, got {args.home!r}")
         home = {"home_lat_deg": lat, "home_lon_deg": lon, "home_alt_m": alt}
+    params: list[tuple[str, float]] = []
+    for item in args.param:
+        name, sep, text = item.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not sep or not name or not math.isfinite(value):
+            raise MockConfigError("--param", f"expected NAME=VALUE (a finite number), got {item!r}")
+        params.append((name.strip(), value))
     config = MockConfig(
         **home,  # type: ignore[arg-type]
         profile=args.profile,
@@ -225,6 +237,7 @@ def config_from_args(args: argparse.Namespace) -> MockConfig:
         truth_log=args.truth_log,
         **wind,  # type: ignore[arg-type]
         signing_key_file=args.signing_key,
+        params=tuple(params),
     )
     config.validate()
     return config

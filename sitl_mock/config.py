@@ -256,6 +256,9 @@ class MockConfig:
     wind_gust_time_constant_s: float = 2.0
     # External pushes (sitl_mock.dynamics.Push: start, duration, specific force NED m/s^2).
     pushes: tuple[Push, ...] = ()
+    # Parameter values at start, as (name, value) pairs (like PX4_PARAM_NAME=value or a parameter
+    # file): e.g. (("MPC_TILTMAX_AIR", 30.0),) clips the acceleration path at 30 deg.
+    params: tuple[tuple[str, float], ...] = ()
     # MAVLink 2 signing key file (32 raw bytes, 64 hex digits or a passphrase; sitl_mock.signing):
     # sign everything sent, drop unsigned / wrongly signed frames. None: no signing.
     signing_key_file: str | None = None
@@ -284,6 +287,10 @@ class MockConfig:
         if not (math.isfinite(self.wind_gust_time_constant_s) and 0.05 <= self.wind_gust_time_constant_s <= 600.0):
             raise MockConfigError("wind_gust_time_constant_s",
                                   f"must be in [0.05, 600] s, got {self.wind_gust_time_constant_s}")
+        known = {spec.name for spec in PROFILES[self.profile].params}
+        for i, item in enumerate(self.params):
+            if not (isinstance(item, tuple) and len(item) == 2 and item[0] in known and math.isfinite(float(item[1]))):
+                raise MockConfigError(f"params[{i}]", f"expected (a {self.profile} parameter name, a finite value), got {item!r}")
         for i, push in enumerate(self.pushes):
             if not isinstance(push, Push):
                 raise MockConfigError(f"pushes[{i}]", f"expected a sitl_mock.dynamics.Push, got {push!r}")

@@ -104,6 +104,10 @@ HOVER_PARAM: Mapping[str, str] = MappingProxyType({"px4": "MPC_THR_HOVER", "ardu
 # The parameter that switches the acceleration mapping's tilt between g alone (1) and the whole
 # demand (0); ArduPilot has none (it always tilts from g alone).
 ACCEL_DECOUPLE_PARAM = "MPC_ACC_DECOUPLE"
+# The tilt limit of the acceleration path, as (parameter, degrees per unit), the first positive one
+# ruling (PX4 MPC_TILTMAX_AIR deg; ArduPilot PSC_ANGLE_MAX deg unless 0, then ANGLE_MAX cdeg);
+# each profile lists its own, set from the vehicle's tilt_max_rad.
+TILT_LIMIT_PARAMS: Mapping[str, float] = MappingProxyType({"MPC_TILTMAX_AIR": 1.0, "PSC_ANGLE_MAX": 1.0, "ANGLE_MAX": 0.01})
 
 PX4_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_DISARM_LAND", 2.0),  # s, auto-disarm after landing
@@ -116,6 +120,7 @@ PX4_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_ACC_DECOUPLE", 1, ParamType.INT32),  # tilt from g alone (replaced by the vehicle's)
     ParamSpec("MPC_LAND_SPEED", 0.7),  # m/s
     ParamSpec("MPC_THR_HOVER", 0.5),  # 0..1, replaced by the vehicle's true hover thrust
+    ParamSpec("MPC_TILTMAX_AIR", 45.0),  # deg, the acceleration path's tilt limit (replaced by the vehicle's)
     ParamSpec("MPC_TKO_SPEED", 1.5),  # m/s
     ParamSpec("MPC_XY_CRUISE", 5.0),  # m/s
     ParamSpec("MPC_Z_V_AUTO_DN", 1.5),  # m/s
@@ -128,6 +133,7 @@ ARDUPILOT_PARAMS: tuple[ParamSpec, ...] = (
     # ArduPilot's default is 1 (the collective sent with an attitude / rate target is divided by
     # cos(target tilt)); the mock flies the thrust as sent, and says so
     ParamSpec("ATC_ANGLE_BOOST", 0, ParamType.INT32),
+    ParamSpec("ANGLE_MAX", 3000, ParamType.INT32),  # cdeg, lean angle limit (replaced by the vehicle's)
     ParamSpec("DISARM_DELAY", 10, ParamType.INT32),  # s, auto-disarm on the ground
     ParamSpec("FRAME_CLASS", 1, ParamType.INT32),
     ParamSpec("GUID_OPTIONS", 0, ParamType.INT32),
@@ -135,6 +141,7 @@ ARDUPILOT_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("LAND_SPEED", 50, ParamType.INT32),  # cm/s
     ParamSpec("PILOT_SPEED_UP", 250, ParamType.INT32),  # cm/s, the stick's full climb / descent in LOITER (PILOT_SPEED_DN 0)
     ParamSpec("MOT_THST_HOVER", 0.35),  # 0..1, replaced by the vehicle's true hover thrust
+    ParamSpec("PSC_ANGLE_MAX", 0.0),  # deg, position controller's lean limit; 0: ANGLE_MAX
     ParamSpec("PSC_JERK_XY", 5.0),  # m/s^3
     ParamSpec("PSC_JERK_Z", 5.0),  # m/s^3
     ParamSpec("RTL_ALT", 1500, ParamType.INT32),  # cm

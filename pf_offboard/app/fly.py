@@ -299,18 +299,26 @@ async def _fly(
             result = exc.result
     flight = result.flight
     _report(stream, result.reason, result.exit_code, result.summary, result.log_dir, flight)
-    _write_summary_json(request.json, result.exit_code, result.reason, result.summary, result.log_dir, result.config)
+    _write_summary_json(request.json, result.exit_code, result.reason, result.summary, result.log_dir, result.config,
+                        _tilt_limit_deg(flight))  # fmt: skip
     return FlyOutcome(
         result.exit_code, result.reason, result.log_dir, result.summary, result.activation_time_s, result.breach,
         result.breach_time_s, result.link_counters, result.estimator,
     )  # fmt: skip
 
 
-def _write_summary_json(as_json: bool, code: int, reason: str, summary: Any, log_dir: Path, config: Any) -> None:
+def _tilt_limit_deg(flight: Any) -> float | None:
+    """The tilt limit the follower planned and flew with (the config's, or the autopilot's if lower)."""
+    limits = getattr(flight.pipeline.follower, "limits", None)
+    return None if limits is None else float(limits.max_tilt_deg)
+
+
+def _write_summary_json(as_json: bool, code: int, reason: str, summary: Any, log_dir: Path, config: Any,
+                        tilt_limit_deg: float | None = None) -> None:  # fmt: skip
     """``LOG_DIR/summary.json`` always; with ``--json`` the same report on stdout."""
     from pf_offboard.logs.summary import flight_report, report_json, write_report
 
-    report = flight_report(summary, code, reason, log_dir, config)
+    report = flight_report(summary, code, reason, log_dir, config, tilt_limit_deg=tilt_limit_deg)
     try:
         write_report(report, log_dir)
     except OSError as exc:  # a full disk: the flight's outcome is still reported on the terminal
@@ -327,6 +335,9 @@ def _report(stream: TextIO, reason: str, code: int, summary: Any, log_dir: Path,
         lines.append(f"  safety: {flight.breach.kind.value}{when}: {flight.breach.reason}")
     if flight.monitor is not None:
         lines.append(f"  safety: max measured tilt {math.degrees(flight.monitor.max_tilt_seen_rad):.1f} deg; fence {flight.monitor.fence.describe()}")
+    tilt = _tilt_limit_deg(flight)
+    if tilt is not None:
+        lines.append(f"  tilt limit flown    {tilt:g} deg")
     if flight.pipeline.replaced_steps:
         lines.append(f"  safe hold sent instead of a non-finite command {flight.pipeline.replaced_steps} times")
     if summary is not None:

@@ -7,7 +7,8 @@ Pure data and pure functions (no I/O). The facts come from the autopilots' sourc
 from __future__ import annotations
 
 import enum
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 from pf_offboard.errors import InputError
@@ -75,6 +76,12 @@ class Profile:
     # attitude / rates: the parameter that, at 1, makes the autopilot divide the thrust sent by
     # cos(target tilt) (ArduPilot's ATC_ANGLE_BOOST, default 1), or None (PX4 flies the thrust as sent)
     thrust_angle_boost_param: str | None = None
+    # acceleration: the parameters bounding the tilt the autopilot flies an acceleration setpoint
+    # with, as (name, degrees per unit) in order; the first positive answer is the limit (0 means
+    # "see the next"). PX4: MPC_TILTMAX_AIR (deg). ArduPilot (AC_PosControl::get_lean_angle_max_rad):
+    # PSC_ANGLE_MAX (deg) unless 0, then ANGLE_MAX (cdeg). Attitude / rate targets are not clipped
+    # by either (PX4 offboard attitude; ArduPilot's GUIDED angle control).
+    accel_tilt_limit_params: tuple[tuple[str, float], ...] = ()
     # rates: the autopilot integrates the body rates sent into its own attitude target and closes
     # its attitude loop on it (ArduCopter, AC_AttitudeControl::input_rate_bf_roll_pitch_yaw_rads),
     # so under the app's attitude loop the response is a longer lag with a short dead time; the
@@ -106,6 +113,23 @@ class Profile:
         if reported in (0.0, 1.0):
             return reported == 1.0
         return self.accel_tilt_from_gravity
+
+    def accel_tilt_limit_deg(self, reported: Mapping[str, float]) -> float | None:
+        """The autopilot's acceleration tilt limit (deg) from the values it reported for
+        :attr:`accel_tilt_limit_params` (the first positive one rules); None without a limit
+        parameter or an answer. ValueError naming the parameter for NaN, < 0 or > 90 deg (0 on the
+        last one)."""
+        for name, deg_per_unit in self.accel_tilt_limit_params:
+            if name not in reported:
+                return None
+            value = float(reported[name])
+            deg = value * deg_per_unit
+            last = name == self.accel_tilt_limit_params[-1][0]
+            if not (math.isfinite(deg) and 0.0 <= deg <= 90.0) or (deg == 0.0 and last):
+                raise ValueError(f"{name} = {value:g} is not a tilt limit (0 < tilt <= 90 deg)")
+            if deg > 0.0:
+                return deg
+        return None
 
     def is_offboard(self, custom_mode: int) -> bool:
         """True when a HEARTBEAT custom_mode says the vehicle is in our mode."""
@@ -173,6 +197,7 @@ PX4 = Profile(
     hover_thrust_param="MPC_THR_HOVER",
     attitude_rates_ff=(False, False, True),
     accel_tilt_param="MPC_ACC_DECOUPLE",
+    accel_tilt_limit_params=(("MPC_TILTMAX_AIR", 1.0),),
     offboard_mode_mask=0xFF << 16,
     params_bytewise=True,
     mode_names=px4_mode_name,
@@ -195,6 +220,7 @@ ARDUPILOT = Profile(
     attitude_rates_ff=(True, True, True),
     accel_with_velocity=True,
     thrust_angle_boost_param="ATC_ANGLE_BOOST",
+    accel_tilt_limit_params=(("PSC_ANGLE_MAX", 1.0), ("ANGLE_MAX", 0.01)),
     rates_through_attitude_target=True,
     guid_options=(("attitude", 8), ("rates", 8), ("acceleration", 16)),
     refused_outputs=(("acceleration", _ARDUPILOT_ACCELERATION_REFUSAL),),

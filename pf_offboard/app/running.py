@@ -51,12 +51,18 @@ async def run_flight(flight: Any, setup: Callable[[], Awaitable[None]] | None = 
 
 async def prepare_output(flight: Any, dialect: Any, settings: FlightSettings, allow_set_guid_options: bool, stream: TextIO,
                          warnings: bool = True) -> None:  # fmt: skip
-    """The dialect reads what the output mode needs (hover thrust, tilt mapping, GUID_OPTIONS) and
-    sets it on the encoder; ``warnings``: also what it warns about (ArduPilot's jerk limits)."""
+    """The dialect reads what the output mode needs (hover thrust, tilt mapping, tilt limit,
+    GUID_OPTIONS) and sets it on the encoder (the tilt limit on the follower: law and speed profile); ``warnings``: also what it warns about (ArduPilot's jerk limits)."""
     pipeline = flight.pipeline
     pipeline.encoder = await dialect.read_setpoint_mapping(
         flight.params, settings.output_mode, settings.hover_thrust, pipeline.encoder, lambda line: print(line, file=stream)
     )
+    follower = pipeline.follower
+    cap = getattr(follower, "cap_tilt", None)
+    if cap is not None:  # the autopilot's tilt limit, read before activation (acceleration output)
+        cap(await dialect.read_tilt_limit(
+            flight.params, settings.output_mode, follower.limits.max_tilt_deg, lambda line: print(line, file=stream)
+        ))  # fmt: skip
     await dialect.ensure_output_requirements(flight.params, settings.output_mode, allow_set_guid_options)
     if warnings:
         for line in await dialect.output_warnings(flight.params, settings.output_mode):

@@ -7,6 +7,8 @@ and, with the inner-loop compensation, the compensator's. World ENU z up, body F
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 import os
 import warnings
@@ -291,6 +293,7 @@ class PathFollower:
         response_s = max(self.vehicle.accel_lag_xy_s, self.vehicle.accel_lag_z_s) + self.vehicle.accel_delay_s
         self.profile = (SpeedProfile(path, speed_profile, self.limits, speed, response_s)
                         if speed_profile is not None else None)  # fmt: skip
+        self._speed_profile_spec, self._response_s = speed_profile, response_s
         self._yaw = YawProfile(self.yaw, path.length_m, path.closed, speed)
         self._closed = bool(path.closed)
         self._lam_max = float(path.lam_max)
@@ -299,6 +302,17 @@ class PathFollower:
         self._jets = path.frame_jets
         self._arclength = path.arclength
         self._ramp = _StartRamp(self.limits.max_tangential_accel_m_s2, self._length if self._closed else None, speed)
+
+    def cap_tilt(self, max_tilt_deg: float) -> None:
+        """Plan and fly within ``max_tilt_deg`` (the autopilot's own tilt limit, read at connect)
+        when it is below :attr:`limits`' ``max_tilt_deg``: the law's limits and the speed profile
+        are rebuilt with it (before activation); otherwise nothing changes."""
+        if not max_tilt_deg < self.limits.max_tilt_deg:
+            return
+        self.limits = dataclasses.replace(self.limits, max_tilt_deg=float(max_tilt_deg))
+        self.law = ControlLaw(self.gains, self.limits)
+        if self._speed_profile_spec is not None:
+            self.profile = SpeedProfile(self.path, self._speed_profile_spec, self.limits, self.speed, self._response_s)
 
     @classmethod
     def paper(

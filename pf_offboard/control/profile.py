@@ -137,6 +137,7 @@ class ProfileStats(NamedTuple):
     max_tangential_jerk_m_s3: float  # on the grid, where V > 0.05 m/s
     max_accel_use: float  # largest share of the limits the reference motion uses (<= accel_share)
     max_tilt_rate_rad_s: float  # largest roll/pitch rate of the reference thrust vector (grid)
+    max_tilt_deg: float  # largest tilt of the reference thrust vector g e_z + a_ref from vertical (grid)
 
 
 # ---------------------------------------------------------------------------------- geometry
@@ -361,6 +362,14 @@ def _tilt_rate(b: NDArray[np.float64], geo: _Geometry, closed: bool) -> NDArray[
     return np.linalg.norm(h, axis=1) / fn
 
 
+def _tilt_deg(b: NDArray[np.float64], geo: _Geometry, closed: bool) -> NDArray[np.float64]:
+    """Tilt (deg) of the reference thrust vector ``g e_z + sigma_ss V^2 + t A`` on the grid."""
+    a, _ = _derivatives(b, geo.ds, closed)
+    f = geo.s_ss * b[:, None] + geo.t_dir * a[:, None]
+    f[:, 2] += G
+    return np.degrees(np.arctan2(np.hypot(f[:, 0], f[:, 1]), f[:, 2]))
+
+
 def _travel_time(b: NDArray[np.float64], ds: float, closed: bool) -> float:
     v = np.sqrt(np.maximum(b, 0.0))
     v1 = np.roll(v, -1) if closed else v[1:]
@@ -425,6 +434,7 @@ class SpeedProfile:
             max_tangential_jerk_m_s3=float(np.abs(jerk[moving]).max()) if moving.any() else 0.0,
             max_accel_use=float(max(feas.use(i, float(bi), float(ai)) for i, (bi, ai) in enumerate(zip(b, a)))),
             max_tilt_rate_rad_s=float(_tilt_rate(b, geo, closed).max()),
+            max_tilt_deg=float(_tilt_deg(b, geo, closed).max()),
         )
 
     def _smoothed(self, ub: NDArray[np.float64], geo: _Geometry, feas: _Feasible) -> NDArray[np.float64]:

@@ -28,6 +28,8 @@ Pure and I/O-free; world ENU z up, body FLU; m, m/s, m/s^2, s.
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -129,6 +131,12 @@ class TrajectoryTracker:
             vehicle=follower.vehicle, compensator=follower.compensator,
             compensation=follower.compensation if follower.compensator is not None else Compensation.off(),
         )  # fmt: skip
+
+    def cap_tilt(self, max_tilt_deg: float) -> None:
+        """Fly within ``max_tilt_deg`` when it is below :attr:`limits`' (see PathFollower.cap_tilt)."""
+        if max_tilt_deg < self.limits.max_tilt_deg:
+            self.limits = dataclasses.replace(self.limits, max_tilt_deg=float(max_tilt_deg))
+            self.law = ControlLaw(self.gains, self.limits)
 
     def reset(self) -> None:
         """Start the timing over at the next :meth:`update` (activation; an estimator reset, after

@@ -248,6 +248,22 @@ def _thrust_angle_boost(entries: Sequence[TlogEntry], profile: Any, output_mode:
     return False if value is None else value != 0.0
 
 
+def _tilt_limit_from_log(entries: Sequence[TlogEntry], profile: Any, output_mode: str) -> float | None:
+    """The autopilot's acceleration tilt limit as fly read it (the logged PARAM_VALUEs of
+    ``accel_tilt_limit_params``), or None (another output mode, or a log without them)."""
+    if output_mode != "acceleration" or not profile.accel_tilt_limit_params:
+        return None
+    reported = {}
+    for name, _ in profile.accel_tilt_limit_params:
+        value = _param_from_log(entries, name, profile)
+        if value is not None:
+            reported[name] = value
+    try:
+        return profile.accel_tilt_limit_deg(reported)
+    except ValueError as exc:
+        raise InputError("LOG", f"logged {exc}") from None
+
+
 def build_pipeline(
     config: Any,
     entries: Sequence[TlogEntry],
@@ -296,6 +312,9 @@ def build_pipeline(
     )  # fmt: skip
     if follower is None:
         follower = controller_from_config(config)
+    tilt = _tilt_limit_from_log(entries, profile, output_mode)
+    if tilt is not None and hasattr(follower, "cap_tilt"):
+        follower.cap_tilt(tilt)  # as fly: min(limits.max_tilt_deg, the autopilot's)
     source = options.state_source or _state_source_of(entries)
     return Pipeline(follower, encoder, Estimator(source, settings.velocity_correction_s)), profile, output_mode, target_system
 

@@ -355,9 +355,10 @@ SUMMARY_SCHEMA = 1
 
 
 def flight_report(summary: FlightSummary | None, exit_code: int, reason: str, log_dir: str | Path | None,
-                  config: Any = None, command: str = "fly") -> dict[str, Any]:  # fmt: skip
+                  config: Any = None, command: str = "fly", tilt_limit_deg: float | None = None) -> dict[str, Any]:  # fmt: skip
     """The end-of-flight report as one JSON-ready mapping: how the flight ended, the summary, the
-    logs, and the path's geodetic origin when the path came from a planning tool."""
+    logs, the tilt limit flown (``tilt_limit_deg``: min(limits.max_tilt_deg, the autopilot's)), and
+    the path's geodetic origin when the path came from a planning tool."""
     geodetic = getattr(getattr(config, "path", None), "geodetic", None)
     origin = getattr(geodetic, "origin", None)
     report: dict[str, Any] = {
@@ -369,6 +370,8 @@ def flight_report(summary: FlightSummary | None, exit_code: int, reason: str, lo
         "config": getattr(config, "source", None),
         "summary": summary.to_dict() if summary is not None else None,
     }
+    if tilt_limit_deg is not None:
+        report["tilt_limit_deg"] = tilt_limit_deg
     if geodetic is not None:
         report["path_file"] = {
             "file": geodetic.file,

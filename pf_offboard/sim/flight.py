@@ -72,6 +72,9 @@ class SimSpec:
     # an external push: (start s of simulated time, duration s, ax, ay, az m/s^2 world ENU), a
     # specific force on the airframe on top of thrust, gravity, drag and wind
     push: tuple[float, float, float, float, float] | None = None
+    # the mock autopilot's parameters at start, (name, value) pairs (like PX4_PARAM_NAME=value),
+    # e.g. (("MPC_TILTMAX_AIR", 30.0),): read by the sim as fly reads them
+    autopilot_params: tuple[tuple[str, float], ...] = ()
     output_mode: str | None = None  # default: config flight.output_mode
     rate_hz: float | None = None  # control / telemetry rate; default: config flight.setpoint_rate_hz
     duration_s: float | None = None  # simulated time from the start
@@ -345,6 +348,7 @@ class SimFlight:
             time_constant_s=settings.attitude_time_constant_s,
         )  # fmt: skip
         self.pipeline = Pipeline(follower, encoder, Estimator("local_position", settings.velocity_correction_s))
+        self._tilt_params: dict[str, float] = {}  # the autopilot's tilt limit parameters as reported
         self.laps = LapCounter(self.path.length_m, self.path.closed)
         self.end = EndSpec(laps=spec.laps, duration_s=None)
         height = spec.throw_height_m or config.flight.throw_activation_height_m or 2.0
@@ -396,6 +400,7 @@ class SimFlight:
         mock = MockConfig(
             profile=spec.autopilot, vehicle=spec.vehicle, spawn=spawn, seed=spec.seed,
             lockstep=True, lockstep_dt_s=self.dt_s, step_dt_s=self.dt_s, ekf_ready_delay_s=0.0, **disturbances,
+            params=tuple(spec.autopilot_params),
         )  # fmt: skip
         ap = Autopilot(mock, np.random.default_rng(spec.seed))
         ap.add_link(0)
@@ -436,6 +441,8 @@ class SimFlight:
         params = [self.profile.hover_thrust_param]
         if self.settings.output_mode == "acceleration" and self.profile.accel_tilt_param is not None:
             params.append(self.profile.accel_tilt_param)
+        if self.settings.output_mode == "acceleration":  # the autopilot's tilt limit (read_tilt_limit)
+            params += [name for name, _ in self.profile.accel_tilt_limit_params]
         for param in params:
             self._send(log, mavlink.MAVLink_param_request_read_message(AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, param.encode(), -1))
         required = self.profile.required_guid_options(self.settings.output_mode)
@@ -456,6 +463,12 @@ class SimFlight:
                 self.pipeline.encoder = self.pipeline.encoder.with_hover_thrust(float(value))
             elif pid == self.profile.accel_tilt_param and self.settings.output_mode == "acceleration":
                 self.pipeline.encoder = self.pipeline.encoder.with_tilt_from_gravity(self.profile.tilts_from_gravity(value))
+            elif any(pid == name for name, _ in self.profile.accel_tilt_limit_params) and self.settings.output_mode == "acceleration":
+                self._tilt_params[pid] = float(value)
+                tilt = self.profile.accel_tilt_limit_deg(self._tilt_params)  # as fly: min(config's, autopilot's)
+                cap = getattr(self.pipeline.follower, "cap_tilt", None)
+                if tilt is not None and cap is not None:
+                    cap(tilt)
             return
         if kind == "COMMAND_ACK":
             if msg.command == mavlink.MAV_CMD_DO_SET_MODE and self._mode_requested and self.phase == "engaging":
@@ -542,7 +555,10 @@ class SimFlight:
 
         crashed = bool(self.autopilot.truth.crashed)
         if self.write_logs:
-            write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim"), paths.tlog.parent)
+            limits = getattr(self.pipeline.follower, "limits", None)
+            tilt = None if limits is None else float(limits.max_tilt_deg)
+            write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim", tilt_limit_deg=tilt),
+                         paths.tlog.parent)  # fmt: skip
         return SimResult(
             paths=paths,
             summary=summary,

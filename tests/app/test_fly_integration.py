@@ -431,3 +431,39 @@ def test_acceleration_output_without_an_answer_assumes_px4s_default(tmp_path, ca
     assert mode != "OFFBOARD"
     assert outcome.exit_code == 3
     assert "MPC_ACC_DECOUPLE = 2 is neither 0 nor 1" in outcome.reason
+
+
+def test_acceleration_output_plans_within_the_autopilots_tilt_limit(tmp_path, capsys) -> None:
+    """fly reads MPC_TILTMAX_AIR: below limits.max_tilt_deg one warning names both values,
+    the follower (law and speed profile) is rebuilt with it before activation, and the summary
+    and summary.json report the tilt limit flown. At or above the config's (50 here): the
+    config's, no warning."""
+    import json
+
+    outcome, mode = _fly_with_params(tmp_path, "log", "acceleration", 2, lambda params: params.update(MPC_TILTMAX_AIR=30.0))
+    assert outcome.exit_code == 0, outcome.reason
+    err = capsys.readouterr().err
+    warned = [line for line in err.splitlines() if "tilt limit" in line and "warning" in line]
+    assert len(warned) == 1 and "(MPC_TILTMAX_AIR) is 30 deg" in warned[0] and "limits.max_tilt_deg = 50 deg" in warned[0], err
+    assert json.loads((tmp_path / "log" / "summary.json").read_text())["tilt_limit_deg"] == 30.0
+    out = [e.message for e in read_tlog(tmp_path / "log" / "flight.tlog") if e.direction == "out"]
+    assert any(m.get_type() == "PARAM_REQUEST_READ" and m.param_id == "MPC_TILTMAX_AIR" for m in out)
+    outcome, _ = _fly_with_params(tmp_path, "log2", "acceleration", 2, lambda params: params.update(MPC_TILTMAX_AIR=60.0))
+    assert outcome.exit_code == 0, outcome.reason
+    err = capsys.readouterr().err
+    assert "warning: the autopilot's tilt limit" not in err and "tilt limit flown    50 deg" in err
+    assert json.loads((tmp_path / "log2" / "summary.json").read_text())["tilt_limit_deg"] == 50.0
+
+
+def test_tilt_limit_unanswered_keeps_the_configs_and_nonsense_is_refused(tmp_path, capsys) -> None:
+    """No answer for MPC_TILTMAX_AIR: a warning, the config's limit, the flight goes on. NaN, <= 0
+    or > 90 deg: a link error naming the parameter (exit 3) before any mode change."""
+    outcome, _ = _fly_with_params(tmp_path, "log", "acceleration", 2, lambda params: params.pop("MPC_TILTMAX_AIR"))
+    assert outcome.exit_code == 0, outcome.reason
+    err = capsys.readouterr().err
+    assert "warning: parameter MPC_TILTMAX_AIR: no PARAM_VALUE" in err and "limits.max_tilt_deg = 50 deg" in err, err
+    for i, bad in enumerate((float("nan"), 0.0, 95.0)):
+        outcome, mode = _fly_with_params(tmp_path, f"bad{i}", "acceleration", 2, lambda params, v=bad: params.update(MPC_TILTMAX_AIR=v))
+        assert mode != "OFFBOARD"
+        assert outcome.exit_code == 3
+        assert "MPC_TILTMAX_AIR" in outcome.reason and "is not a tilt limit" in outcome.reason, outcome.reason

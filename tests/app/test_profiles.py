@@ -56,3 +56,20 @@ def test_tilt_from_gravity_by_the_reported_parameter() -> None:
     assert PX4.tilts_from_gravity(1.0) and not PX4.tilts_from_gravity(0.0)
     assert PX4.tilts_from_gravity(None) and PX4.tilts_from_gravity(2.0) and PX4.tilts_from_gravity(float("nan"))
     assert ARDUPILOT.tilts_from_gravity(None)
+
+
+def test_acceleration_tilt_limit_by_the_reported_parameters() -> None:
+    """PX4: MPC_TILTMAX_AIR (deg). ArduPilot: PSC_ANGLE_MAX (deg) unless 0, then ANGLE_MAX (cdeg),
+    as AC_PosControl::get_lean_angle_max_rad. Not (yet) reported: None; nonsense: ValueError
+    naming the parameter."""
+    assert PX4.accel_tilt_limit_deg({"MPC_TILTMAX_AIR": 30.0}) == 30.0
+    assert PX4.accel_tilt_limit_deg({}) is None
+    assert ARDUPILOT.accel_tilt_limit_deg({"PSC_ANGLE_MAX": 25.0}) == 25.0
+    assert ARDUPILOT.accel_tilt_limit_deg({"PSC_ANGLE_MAX": 0.0}) is None  # ANGLE_MAX not read yet
+    assert ARDUPILOT.accel_tilt_limit_deg({"PSC_ANGLE_MAX": 0.0, "ANGLE_MAX": 3000.0}) == 30.0
+    for profile, reported in ((PX4, {"MPC_TILTMAX_AIR": float("nan")}), (PX4, {"MPC_TILTMAX_AIR": 0.0}),
+                              (PX4, {"MPC_TILTMAX_AIR": 91.0}), (ARDUPILOT, {"PSC_ANGLE_MAX": -5.0}),
+                              (ARDUPILOT, {"PSC_ANGLE_MAX": 0.0, "ANGLE_MAX": 0.0})):  # fmt: skip
+        name = next(iter(reported)) if next(iter(reported.values())) != 0.0 or len(reported) == 1 else "ANGLE_MAX"
+        with pytest.raises(ValueError, match=name):
+            profile.accel_tilt_limit_deg(reported)

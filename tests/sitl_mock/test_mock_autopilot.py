@@ -11,7 +11,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_mock.autopilot import Autopilot
-from sitl_mock.config import FaultConfig, MockConfig, SpawnSpec
+from sitl_mock.config import FaultConfig, MockConfig, MockConfigError, SpawnSpec
 from sitl_mock.dynamics import AttitudeSetpoint, MotorsOff, RateSetpoint
 from sitl_mock.testing import accel_setpoint, command_long
 
@@ -140,6 +140,30 @@ def test_hover_param_is_the_vehicles_and_setting_it_reaches_the_dynamics() -> No
     assert param_value(ap, "MPC_THR_HOVER").param_value == pytest.approx(ap.sim.params.hover_thrust)
     ap.handle(mavlink.MAVLink_param_set_message(1, 1, b"MPC_THR_HOVER", 0.4, mavlink.MAV_PARAM_TYPE_REAL32), 0)
     assert ap.sim.params.hover_thrust == pytest.approx(0.4)
+
+
+def test_tilt_limit_param_is_the_vehicles_and_setting_it_clips_the_acceleration_path() -> None:
+    """PX4 MPC_TILTMAX_AIR (deg) / ArduPilot ANGLE_MAX (cdeg; PSC_ANGLE_MAX 0 = use it) report the
+    vehicle's tilt limit; setting one (PARAM_SET or MockConfig.params at start) moves the limit
+    the acceleration path clips at; out of range: refused, unchanged."""
+    px4 = make("px4")
+    assert param_value(px4, "MPC_TILTMAX_AIR").param_value == pytest.approx(math.degrees(px4.sim.params.tilt_max_rad))
+    px4.handle(mavlink.MAVLink_param_set_message(1, 1, b"MPC_TILTMAX_AIR", 30.0, mavlink.MAV_PARAM_TYPE_REAL32), 0)
+    assert math.degrees(px4.sim.params.tilt_max_rad) == pytest.approx(30.0)
+    px4.handle(mavlink.MAVLink_param_set_message(1, 1, b"MPC_TILTMAX_AIR", 95.0, mavlink.MAV_PARAM_TYPE_REAL32), 0)
+    assert px4.params["MPC_TILTMAX_AIR"] == 30.0
+    ap = make("ardupilot")
+    assert (ap.params["PSC_ANGLE_MAX"], ap.params["ANGLE_MAX"]) == (0.0, round(100 * math.degrees(ap.sim.params.tilt_max_rad)))
+    ap.handle(mavlink.MAVLink_param_set_message(1, 1, b"PSC_ANGLE_MAX", 20.0, mavlink.MAV_PARAM_TYPE_REAL32), 0)
+    assert math.degrees(ap.sim.params.tilt_max_rad) == pytest.approx(20.0)
+    ap.handle(mavlink.MAVLink_param_set_message(1, 1, b"PSC_ANGLE_MAX", 0.0, mavlink.MAV_PARAM_TYPE_REAL32), 0)
+    assert math.degrees(ap.sim.params.tilt_max_rad) == pytest.approx(ap.params["ANGLE_MAX"] / 100.0)
+    start = Autopilot(MockConfig(profile="px4", params=(("MPC_TILTMAX_AIR", 25.0),)))
+    assert start.params["MPC_TILTMAX_AIR"] == 25.0 and math.degrees(start.sim.params.tilt_max_rad) == pytest.approx(25.0)
+    with pytest.raises(MockConfigError, match="params"):
+        Autopilot(MockConfig(profile="px4", params=(("MPC_TILTMAX_AIR", 0.0),)))
+    with pytest.raises(MockConfigError, match=r"params\[0\]"):
+        MockConfig(profile="px4", params=(("ANGLE_MAX", 3000.0),)).validate()
 
 
 def test_int_params_bytewise_on_px4_and_cast_on_ardupilot() -> None:

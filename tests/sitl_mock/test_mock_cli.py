@@ -40,8 +40,10 @@ def test_config_round_trips_through_flags() -> None:
     config = MockConfig(profile="ardupilot", vehicle="px4-default", udp_local_port=0, udp_remote=None, tcp_port=0,
                         speed=5.0, spawn=SpawnSpec("hover", (1.0, 2.0, -3.0)), seed=4, duration_s=2.5,
                         faults=FaultConfig(loss=0.25, duplicate=0.01, corrupt=0.02, blackout_s=(1.0, 2.0),
-                                           takeover_at_s=3.0, takeover_mode="BRAKE", loss_from_offboard=True))
+                                           takeover_at_s=3.0, takeover_mode="BRAKE", loss_from_offboard=True),
+                        params=(("ANGLE_MAX", 2500.0), ("PSC_ANGLE_MAX", 20.0)))
     assert _config(*config_to_args(config)) == config
+    assert _config("--param", "MPC_TILTMAX_AIR=30").params == (("MPC_TILTMAX_AIR", 30.0),)
 
 
 @pytest.mark.parametrize(
@@ -56,6 +58,9 @@ def test_config_round_trips_through_flags() -> None:
         (["--takeover", "1,GUIDED"], "unknown for px4"),
         (["--blackout", "5"], "--blackout"),
         (["--seed", "-1"], "seed"),
+        (["--param", "MPC_TILTMAX_AIR"], "--param"),
+        (["--param", "MPC_TILTMAX_AIR=abc"], "--param"),
+        (["--param", "NO_SUCH_PARAM=1"], "params[0]"),
         (["--duration", "nan"], "duration"),
         (["--duration", "inf"], "duration"),
         (["--speed", "nan"], "speed"),

@@ -96,6 +96,40 @@ class Dialect:
             raise LinkError(f"{profile.accel_tilt_param} = {value:g} is neither 0 nor 1")
         return encoder.with_tilt_from_gravity(profile.tilts_from_gravity(value))
 
+    async def read_tilt_limit(
+        self, params: Parameters, output_mode: str, config_deg: float, warn: Callable[[str], None]
+    ) -> float:
+        """The tilt limit to plan and fly with (degrees): min(``config_deg``, the autopilot's).
+
+        acceleration only (attitude / rate targets are flown as sent): the autopilot's limit from
+        :attr:`Profile.accel_tilt_limit_params`; lower than the config's: a warning naming both.
+        Unanswered: the config's, with a warning. NaN, <= 0 or > 90 degrees: LinkError naming the
+        parameter.
+        """
+        names = self.profile.accel_tilt_limit_params
+        if output_mode != "acceleration" or not names:
+            return config_deg
+        reported: dict[str, float] = {}
+        for name, _deg_per_unit in names:
+            try:
+                reported[name] = float(await params.read(name))
+            except LinkError as exc:
+                warn(f"pf-offboard: warning: {exc}; planning with limits.max_tilt_deg = {config_deg:g} deg, "
+                     "which the autopilot may clip")  # fmt: skip
+                return config_deg
+            try:
+                autopilot_deg = self.profile.accel_tilt_limit_deg(reported)
+            except ValueError as exc:
+                raise LinkError(str(exc)) from None
+            if autopilot_deg is not None:
+                break
+        assert autopilot_deg is not None
+        if autopilot_deg < config_deg:
+            warn(f"pf-offboard: warning: the autopilot's tilt limit ({name}) is {autopilot_deg:g} deg, below "
+                 f"limits.max_tilt_deg = {config_deg:g} deg; planning and flying with {autopilot_deg:g} deg")  # fmt: skip
+            return autopilot_deg
+        return config_deg
+
     async def ensure_output_requirements(self, params: Parameters, output_mode: str, allow_set: bool) -> None:
         """Make sure the autopilot's parameters let it fly ``output_mode`` as we mean it, or refuse."""
 

@@ -23,6 +23,7 @@ that is not finite, an implausible estimator jump).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import tempfile
 from collections.abc import Sequence
@@ -77,6 +78,14 @@ class _Setup:
         # the encoder's mapping: read from the autopilot where it reports one, else the profile's
         self.tilt_from_gravity = (self.profile.tilts_from_gravity(tilt_param) if self.profile.accel_tilt_param is not None
                                   else self.profile.accel_tilt_from_gravity)  # fmt: skip
+        # the tilt limit flown (acceleration): min(config's, the autopilot's), as the mock reports it
+        self.tilt_limit_deg: float | None = None
+        if fs.output_mode == "acceleration" and self.profile.accel_tilt_limit_params:
+            from sitl_mock.autopilot import tilt_limit_params
+
+            self.tilt_limit_deg = self.profile.accel_tilt_limit_deg(tilt_limit_params(settings.autopilot, self.vehicle))
+            if self.tilt_limit_deg is not None:
+                self.follower.cap_tilt(self.tilt_limit_deg)
         # the encoder's hover thrust: the config's, else MPC_THR_HOVER as the mock reports it (float32)
         self.hover_thrust = fs.hover_thrust if fs.hover_thrust is not None else float(np.float32(self.vehicle.hover_thrust))
 
@@ -224,7 +233,10 @@ def fly(tasks: Sequence[Any], trace: list[Arr] | None = None,
         laws = {}
         for text in texts:
             cfg = parse_config_bytes(text.encode("utf-8"))
-            laws[text] = ControlLaw(cfg.gains, cfg.limits)
+            limits = cfg.limits
+            if setup.tilt_limit_deg is not None and setup.tilt_limit_deg < limits.max_tilt_deg:  # as the follower's (cap_tilt)
+                limits = dataclasses.replace(limits, max_tilt_deg=float(setup.tilt_limit_deg))
+            laws[text] = ControlLaw(cfg.gains, limits)
         per_flight = [laws[t.config_yaml] for t in tasks]
     dt = setup.dt_s
     # ---- spawns, as SimFlight._make_autopilot builds them

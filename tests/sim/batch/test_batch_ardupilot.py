@@ -17,7 +17,10 @@ from ..helpers import PX4_SIH
 @pytest.mark.parametrize("output", ["acceleration", "attitude", "rates"])
 def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(output: str, scalar_flight) -> None:
     settings = FlightSettings(vehicle="arducopter", autopilot="ardupilot", duration_s=10.0, settle_s=3.0, output_mode=output)
-    tasks = plan.tasks(PX4_SIH, plan.SweepSpec(flights=2, seed=5, settings=settings))
+    # acceleration plans within ArduCopter's 30 deg ANGLE_MAX (issue 24): two of its thrown starts
+    # crash (as most did at 50 deg, 0 / 10 tracking either way); four keep a flight compared row by row
+    flights = 4 if output == "acceleration" else 2
+    tasks = plan.tasks(PX4_SIH, plan.SweepSpec(flights=flights, seed=5, settings=settings))
     assert all(supported(t) is None for t in tasks)
     assert max(np.hypot(*t.start.wind_enu_m_s[:2]) for t in tasks) > 0.3  # in wind
     trace: list[np.ndarray] = []
