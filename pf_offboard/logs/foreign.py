@@ -110,7 +110,9 @@ def read_foreign_tlog(path: str | Path) -> ForeignTrack:
     last_boot = -math.inf
     while True:
         try:
-            msg: Any = conn.recv_match(type=["LOCAL_POSITION_NED", "HEARTBEAT", "BAD_DATA"])
+            # every record decoded (no type filter: pymavlink then skips unwanted ones undecoded,
+            # and a damaged one among them would go uncounted)
+            msg: Any = conn.recv_match()
         except Exception:  # noqa: BLE001 - a damaged record: skip it
             bad += 1
             continue
