@@ -490,15 +490,11 @@ class Autopilot:
         value = float(msg.param_value)
         if kind is ParamType.INT32 and self.profile.bytewise_params:
             value = float(struct.unpack("<i", struct.pack("<f", value))[0])
-        if not math.isfinite(value):
-            return [(None, self._param_value(name))]  # rejected: report the unchanged value
-        if kind is ParamType.INT32:
-            value = float(int(value))
-        self._set_param(name, value)
+        self._set_param(name, value)  # refused (non-finite, out of range): the unchanged value is reported
         return [(None, self._param_value(name))]
 
     def _set_param(self, name: str, value: float) -> bool:
-        """Set a known parameter (INT32 already truncated); False (unchanged) when refused."""
+        """Set a known parameter (INT32 truncated here); False (unchanged) when refused."""
         if not math.isfinite(value):
             return False
         if self._param_kinds[name] is ParamType.INT32:
