@@ -300,17 +300,11 @@ async def _fly(
     flight = result.flight
     _report(stream, result.reason, result.exit_code, result.summary, result.log_dir, flight)
     _write_summary_json(request.json, result.exit_code, result.reason, result.summary, result.log_dir, result.config,
-                        _tilt_limit_deg(flight))  # fmt: skip
+                        flight.pipeline.tilt_limit_deg)  # fmt: skip
     return FlyOutcome(
         result.exit_code, result.reason, result.log_dir, result.summary, result.activation_time_s, result.breach,
         result.breach_time_s, result.link_counters, result.estimator,
     )  # fmt: skip
-
-
-def _tilt_limit_deg(flight: Any) -> float | None:
-    """The tilt limit the follower planned and flew with (the config's, or the autopilot's if lower)."""
-    limits = getattr(flight.pipeline.follower, "limits", None)
-    return None if limits is None else float(limits.max_tilt_deg)
 
 
 def _write_summary_json(as_json: bool, code: int, reason: str, summary: Any, log_dir: Path, config: Any,
@@ -335,7 +329,7 @@ def _report(stream: TextIO, reason: str, code: int, summary: Any, log_dir: Path,
         lines.append(f"  safety: {flight.breach.kind.value}{when}: {flight.breach.reason}")
     if flight.monitor is not None:
         lines.append(f"  safety: max measured tilt {math.degrees(flight.monitor.max_tilt_seen_rad):.1f} deg; fence {flight.monitor.fence.describe()}")
-    tilt = _tilt_limit_deg(flight)
+    tilt = flight.pipeline.tilt_limit_deg
     if tilt is not None:
         lines.append(f"  tilt limit flown    {tilt:g} deg")
     if flight.pipeline.replaced_steps:

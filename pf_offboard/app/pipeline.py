@@ -69,6 +69,13 @@ class Pipeline:
     time and is reset on activation, when its schedule starts).
     """
 
+    @property
+    def tilt_limit_deg(self) -> float | None:
+        """The tilt limit the follower plans and flies with (deg: the config's, or the autopilot's
+        if lower), None for a follower without limits."""
+        limits = getattr(self.follower, "limits", None)
+        return None if limits is None else float(limits.max_tilt_deg)
+
     def __init__(self, follower: Any, encoder: Encoder, estimator: Estimator | None = None) -> None:
         self.follower = follower
         self.encoder = encoder

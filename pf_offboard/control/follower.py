@@ -7,8 +7,6 @@ and, with the inner-loop compensation, the compensator's. World ENU z up, body F
 
 from __future__ import annotations
 
-import dataclasses
-
 import math
 import os
 import warnings
@@ -307,9 +305,10 @@ class PathFollower:
         """Plan and fly within ``max_tilt_deg`` (the autopilot's own tilt limit, read at connect)
         when it is below :attr:`limits`' ``max_tilt_deg``: the law's limits and the speed profile
         are rebuilt with it (before activation); otherwise nothing changes."""
-        if not max_tilt_deg < self.limits.max_tilt_deg:
+        limits = self.limits.with_tilt_at_most(max_tilt_deg)
+        if limits is self.limits:
             return
-        self.limits = dataclasses.replace(self.limits, max_tilt_deg=float(max_tilt_deg))
+        self.limits = limits
         self.law = ControlLaw(self.gains, self.limits)
         if self._speed_profile_spec is not None:
             self.profile = SpeedProfile(self.path, self._speed_profile_spec, self.limits, self.speed, self._response_s)

@@ -28,8 +28,6 @@ Pure and I/O-free; world ENU z up, body FLU; m, m/s, m/s^2, s.
 
 from __future__ import annotations
 
-import dataclasses
-
 import math
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -134,8 +132,9 @@ class TrajectoryTracker:
 
     def cap_tilt(self, max_tilt_deg: float) -> None:
         """Fly within ``max_tilt_deg`` when it is below :attr:`limits`' (see PathFollower.cap_tilt)."""
-        if max_tilt_deg < self.limits.max_tilt_deg:
-            self.limits = dataclasses.replace(self.limits, max_tilt_deg=float(max_tilt_deg))
+        limits = self.limits.with_tilt_at_most(max_tilt_deg)
+        if limits is not self.limits:
+            self.limits = limits
             self.law = ControlLaw(self.gains, self.limits)
 
     def reset(self) -> None:

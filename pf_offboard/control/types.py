@@ -6,7 +6,7 @@ World frame ENU (z up), body FLU, quaternions (w, x, y, z) body-to-world. Units 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -156,6 +156,11 @@ class Limits:
             )
         if not 0.05 <= self.max_approach_speed_m_s <= 20.0:
             raise InputError("max_approach_speed_m_s", f"must be in [0.05, 20] m/s, got {self.max_approach_speed_m_s}")
+
+    def with_tilt_at_most(self, max_tilt_deg: float) -> Limits:
+        """These limits with ``max_tilt_deg`` lowered to ``max_tilt_deg`` (an autopilot's own tilt
+        limit); ``self`` when it is not lower."""
+        return replace(self, max_tilt_deg=float(max_tilt_deg)) if max_tilt_deg < self.max_tilt_deg else self
 
     @property
     def tan_tilt(self) -> float:

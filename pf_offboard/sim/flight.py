@@ -555,9 +555,8 @@ class SimFlight:
 
         crashed = bool(self.autopilot.truth.crashed)
         if self.write_logs:
-            limits = getattr(self.pipeline.follower, "limits", None)
-            tilt = None if limits is None else float(limits.max_tilt_deg)
-            write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim", tilt_limit_deg=tilt),
+            write_report(flight_report(summary, 1 if crashed else 0, self.reason, paths.tlog.parent, self.config, "sim",
+                                       tilt_limit_deg=self.pipeline.tilt_limit_deg),
                          paths.tlog.parent)  # fmt: skip
         return SimResult(
             paths=paths,

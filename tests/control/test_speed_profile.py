@@ -231,3 +231,20 @@ def test_the_share_caps_the_plan_on_a_tight_path() -> None:
         assert bound * 0.999 <= t <= t0 * 1.001
     assert all(t >= t0 / 1.04 for t in relaxed.values())
     assert whole_share <= t0 / 1.08
+
+
+def test_a_lower_tilt_limit_rebuilds_the_law_and_the_plan_and_a_higher_one_changes_nothing() -> None:
+    """``PathFollower.cap_tilt`` (the autopilot's tilt limit read at connect): below the config's
+    ``limits.max_tilt_deg`` the law and the speed profile are rebuilt with it (a slower plan that
+    tilts less); at or above it the follower is left as it was."""
+    follower = _follower(PAPER_YAML)
+    limits, law, profile = follower.limits, follower.law, follower.profile
+    assert limits.with_tilt_at_most(limits.max_tilt_deg + 5.0) is limits
+    follower.cap_tilt(limits.max_tilt_deg)
+    assert (follower.limits, follower.law, follower.profile) == (limits, law, profile)
+    follower.cap_tilt(20.0)
+    assert follower.limits.max_tilt_deg == 20.0 and follower.limits.max_thrust_m_s2 == limits.max_thrust_m_s2
+    assert follower.law is not law and follower.law.limits == follower.limits
+    assert follower.profile is not None and profile is not None
+    assert follower.profile.stats.max_tilt_deg <= 20.0 < profile.stats.max_tilt_deg
+    assert follower.profile.stats.travel_time_s > profile.stats.travel_time_s

@@ -23,7 +23,6 @@ that is not finite, an implausible estimator jump).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import tempfile
 from collections.abc import Sequence
@@ -233,10 +232,8 @@ def fly(tasks: Sequence[Any], trace: list[Arr] | None = None,
         laws = {}
         for text in texts:
             cfg = parse_config_bytes(text.encode("utf-8"))
-            limits = cfg.limits
-            if setup.tilt_limit_deg is not None and setup.tilt_limit_deg < limits.max_tilt_deg:  # as the follower's (cap_tilt)
-                limits = dataclasses.replace(limits, max_tilt_deg=float(setup.tilt_limit_deg))
-            laws[text] = ControlLaw(cfg.gains, limits)
+            limits = cfg.limits if setup.tilt_limit_deg is None else cfg.limits.with_tilt_at_most(setup.tilt_limit_deg)
+            laws[text] = ControlLaw(cfg.gains, limits)  # as the follower's (cap_tilt)
         per_flight = [laws[t.config_yaml] for t in tasks]
     dt = setup.dt_s
     # ---- spawns, as SimFlight._make_autopilot builds them
