@@ -257,7 +257,8 @@ class AttitudeTracker:
         rates_flu = tracker.update(cmd.attitude, q_meas_enu_flu, cmd.body_rates, time_s=t)
     """
 
-    def __init__(self, law: AttitudeRateLaw | None = None, reference_lag_s: float | None = None) -> None:
+    def __init__(self, law: AttitudeRateLaw | None = None, reference_lag_s: float | None = None,
+                 identify_rate_loop: bool = False) -> None:  # fmt: skip
         self.law = law if law is not None else AttitudeRateLaw()
         self.reference_lag_s = (None if reference_lag_s is None
                                 else _positive("attitude.reference_lag_s", reference_lag_s, 0.01, 2.0))  # fmt: skip
@@ -265,22 +266,47 @@ class AttitudeTracker:
             time_constant_s=self.reference_lag_s, yaw_time_constant_s=self.law.yaw_time_constant_effective_s,
             max_roll_pitch_rate_rad_s=self.law.max_roll_pitch_rate_rad_s, max_yaw_rate_rad_s=self.law.max_yaw_rate_rad_s,
         )  # fmt: skip
+        # identify_rate_loop: the reference only while the vehicle's rate loop is identified fast
+        self.rate_loop = RateLoopIdentifier() if identify_rate_loop and self._ref is not None else None
         self.reset()
 
     @classmethod
-    def from_vehicle(cls, vehicle: Any, **kwargs: Any) -> AttitudeTracker:
-        """The feedback law :meth:`AttitudeRateLaw.from_vehicle` (τ from the rate loop) and a
-        reference lag of :data:`REFERENCE_LAG_FRACTION` × ``vehicle.accel_lag_xy_s`` (none for a
-        model without a lag: the paper's ideal loop)."""
+    def from_vehicle(cls, vehicle: Any, identify_rate_loop: bool = True, **kwargs: Any) -> AttitudeTracker:
+        """The default ``rates`` output: the feedback law :meth:`AttitudeRateLaw.from_vehicle` (τ
+        from the rate loop) and a reference lag of :data:`REFERENCE_LAG_FRACTION` ×
+        ``vehicle.accel_lag_xy_s`` (none for a model without a lag: the paper's ideal loop), used
+        only while the vehicle's rate loop is identified fast (``identify_rate_loop``, the default;
+        False: always)."""
         lag = float(getattr(vehicle, "accel_lag_xy_s", 0.0) or 0.0)
         law = AttitudeRateLaw.from_vehicle(vehicle, **kwargs)
-        return cls(law, REFERENCE_LAG_FRACTION * lag if lag > 0.0 else None)
+        return cls(law, REFERENCE_LAG_FRACTION * lag if lag > 0.0 else None, identify_rate_loop=identify_rate_loop)
+
+    @property
+    def reference_engaged(self) -> bool:
+        """True while the attitude reference shapes the command (False: the law alone)."""
+        return self._ref is not None and (self.rate_loop is None or self._engaged)
 
     def reset(self) -> None:
-        """Forget the reference (it restarts at the next measured attitude)."""
+        """Forget the reference (it restarts at the next measured attitude) and the rate loop's
+        identification."""
         self.reference_enu_flu: tuple[float, float, float, float] | None = None
         self._t: float | None = None
         self._w_ref = (0.0, 0.0, 0.0)
+        self._engaged = False
+        if self.rate_loop is not None:
+            self.rate_loop.reset()
+
+    def _engage(self) -> None:
+        """Follow the identification (with hysteresis): engage at a response of at most
+        :data:`FAST_RATE_LOOP_S`, disengage above :data:`SLOW_RATE_LOOP_S`."""
+        r = self.rate_loop.response_s if self.rate_loop is not None else None
+        if r is None:
+            return
+        if not self._engaged and r <= FAST_RATE_LOOP_S:
+            self._engaged = True
+            self.reference_enu_flu = None  # restart the reference at the measured attitude
+        elif self._engaged and r > SLOW_RATE_LOOP_S:
+            self._engaged = False
 
     def update(self, q_des_enu_flu: ArrayLike, q_meas_enu_flu: ArrayLike, rates_ff_flu_rad_s: ArrayLike,
                time_s: float) -> NDArray[np.float64]:  # fmt: skip
@@ -293,6 +319,13 @@ class AttitudeTracker:
         if not math.isfinite(t):
             raise ValueError(f"time_s: must be finite, got {time_s!r}")
         q_meas = _quat4("q_meas_enu_flu", q_meas_enu_flu)
+        if self.rate_loop is not None:
+            self._engage()
+            if not self._engaged:
+                out = self.law.update(q_des_enu_flu, q_meas, rates_ff_flu_rad_s)
+                self.rate_loop.update(t, q_meas, out)
+                self.reference_enu_flu, self._t = None, t
+                return out
         q_r = self.reference_enu_flu
         if q_r is None or self._t is None or t - self._t > MAX_REFERENCE_GAP_S or t < self._t:
             q_r = q_meas
@@ -307,4 +340,94 @@ class AttitudeTracker:
         w_ref = self._ref.update(q_des_enu_flu, q_r, rates_ff_flu_rad_s)
         self.reference_enu_flu, self._t = q_r, t
         self._w_ref = (float(w_ref[0]), float(w_ref[1]), float(w_ref[2]))
-        return self.law.update(q_r, q_meas, w_ref)
+        out = self.law.update(q_r, q_meas, w_ref)
+        if self.rate_loop is not None:
+            self.rate_loop.update(t, q_meas, out)
+        return out
+
+RATE_LOOP_LAGS_S = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.08, 0.1, 0.15)
+"""Candidate time constants (s) of the autopilot's closed body-rate loop (:class:`RateLoopIdentifier`)."""
+RATE_LOOP_DELAYS_S = (0.0, 0.01, 0.02, 0.03, 0.04, 0.06, 0.08)
+"""Candidate dead times (s) between a rate command and the rate loop's response."""
+FAST_RATE_LOOP_S = 0.04
+"""A rate loop whose identified lag + dead time is at most this (s) is fast enough for the
+attitude reference (:class:`AttitudeTracker`): rotorpy's (33 ms, no dead time) is, the independent
+simulator's (30 ms + 20 ms latency) and the autopilots' (PX4 SIH ≈ 45 + 45 ms) are not."""
+SLOW_RATE_LOOP_S = 0.06
+"""An engaged reference is dropped again when the identified response exceeds this (s)."""
+RATE_LOOP_MEMORY_S = 3.0
+"""Time constant (s) of the identifier's exponential forgetting."""
+RATE_LOOP_MIN_EXCITATION_RAD2_S = 0.1
+"""The identifier decides once the (forgotten) sum of squared measured roll/pitch rates times
+the sample interval reaches this (rad²/s): about a second at 0.3 rad/s."""
+RATE_LOOP_MAX_RESIDUAL = 0.1
+"""… and the best candidate explains the measured rates to within this fraction of their energy."""
+
+
+class RateLoopIdentifier:
+    """Which first-order lag + dead time best maps the roll/pitch rates commanded onto the rates
+    measured (from consecutive attitudes), among :data:`RATE_LOOP_LAGS_S` × :data:`RATE_LOOP_DELAYS_S`.
+
+    Call :meth:`update` once per control step with the sample's time, the measured attitude and the
+    rate command sent at that step (body FLU rad/s). :attr:`response_s` is the best candidate's lag
+    + dead time once the flight excited it enough and the fit is good (else None). Pure Python and
+    numpy, deterministic; no clock.
+    """
+
+    def __init__(self) -> None:
+        lags, delays = np.meshgrid(np.array(RATE_LOOP_LAGS_S), np.array(RATE_LOOP_DELAYS_S), indexing="ij")
+        self._lag = lags.reshape(-1)
+        self._delay = delays.reshape(-1)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (activation, a gap)."""
+        n = self._lag.size
+        self._state = np.zeros((n, 2))  # each candidate's predicted rate at the last sample
+        self._sse = np.zeros(n)
+        self._energy = 0.0
+        self._q: tuple[float, float, float, float] | None = None
+        self._t: float | None = None
+        self._cmds: list[tuple[float, float, float]] = []  # (time sent, roll rate, pitch rate)
+        self.response_s: float | None = None
+        self.best: tuple[float, float] | None = None  # (lag s, dead time s)
+
+    def _command_at(self, t: float) -> tuple[float, float]:
+        for tk, x, y in reversed(self._cmds):
+            if tk <= t + 1e-9:
+                return x, y
+        return 0.0, 0.0
+
+    def update(self, time_s: float, q_meas_enu_flu: tuple[float, float, float, float], rates_sent_flu_rad_s: ArrayLike) -> None:
+        t = float(time_s)
+        q = q_meas_enu_flu
+        if self._t is not None and (t - self._t > MAX_REFERENCE_GAP_S or t < self._t):
+            self.reset()
+        if self._t is not None and self._q is not None and t > self._t:
+            h = t - self._t
+            # mean measured body rate over the interval: 2 vec(q_prev^-1 ⊗ q) / h
+            pw, px, py, pz = self._q
+            rw, rx, ry, _ = _quat_mul((pw, -px, -py, -pz), q)
+            s = 2.0 / h if rw >= 0.0 else -2.0 / h
+            mx, my = s * rx, s * ry
+            mid = 0.5 * (t + self._t)
+            u = np.empty((self._lag.size, 2))
+            for d in RATE_LOOP_DELAYS_S:
+                u[self._delay == d] = self._command_at(mid - d)
+            a = np.exp(-h / self._lag)
+            mean = u + (self._state - u) * ((1.0 - a) * self._lag / h)[:, None]
+            self._state = u + (self._state - u) * a[:, None]
+            forget = math.exp(-h / RATE_LOOP_MEMORY_S)
+            err = mean - np.array([mx, my])
+            self._sse = forget * self._sse + h * np.einsum("ij,ij->i", err, err)
+            self._energy = forget * self._energy + h * (mx * mx + my * my)
+            k = int(np.argmin(self._sse))
+            self.best = (float(self._lag[k]), float(self._delay[k]))
+            good = self._energy >= RATE_LOOP_MIN_EXCITATION_RAD2_S and self._sse[k] <= RATE_LOOP_MAX_RESIDUAL * self._energy
+            self.response_s = self.best[0] + self.best[1] if good else None
+        r = np.asarray(rates_sent_flu_rad_s, dtype=float).reshape(-1)
+        self._cmds.append((t, float(r[0]), float(r[1])))
+        horizon = t - max(RATE_LOOP_DELAYS_S) - 0.05
+        while len(self._cmds) > 2 and self._cmds[1][0] <= horizon:
+            self._cmds.pop(0)
+        self._q, self._t = q, t

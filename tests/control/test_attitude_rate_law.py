@@ -10,6 +10,7 @@ import pytest
 
 from pf_offboard import frames
 from pf_offboard.control import DEFAULT_ATTITUDE_TIME_CONSTANT_S, AttitudeRateLaw, AttitudeTracker, VehicleModel
+from pf_offboard.control.attitude import FAST_RATE_LOOP_S, RateLoopIdentifier
 from pf_offboard.errors import InputError
 
 
@@ -218,7 +219,7 @@ def test_the_tracker_answers_with_the_references_lag_not_the_laws() -> None:
     = 33 % after 0.1 s; the tracker with a 0.075 s reference about 1 - e^-(0.1/0.075) = 74 % less
     the rate loop's lag (measured 64 %) - the response the compensator's 0.1 s lag model expects
     - and it settles without overshoot (the law's feedback keeps its 0.25 s)."""
-    tracker = AttitudeTracker.from_vehicle(VehicleModel.typical())
+    tracker = AttitudeTracker.from_vehicle(VehicleModel.typical(), identify_rate_loop=False)
     assert tracker.law.time_constant_s == pytest.approx(0.25) and tracker.reference_lag_s == pytest.approx(0.075)
     alone = _step_response(lambda qd, q, t: AttitudeRateLaw().update(qd, q, np.zeros(3)), 1.5)
     tracked = _step_response(lambda qd, q, t: tracker.update(qd, q, np.zeros(3), time_s=t), 1.5)
@@ -247,3 +248,60 @@ def test_the_tracker_without_a_reference_is_the_law_and_restarts_after_a_gap() -
     assert np.allclose(tracker.update(q_des, level, np.zeros(3), time_s=2.01), first)
     with pytest.raises(ValueError):
         tracker.update(q_des, level, np.zeros(3), time_s=math.nan)
+
+
+def _wander(tracker, rate_tau_s: float, delay_s: float, seconds: float, dt: float = 0.01):
+    """Fly a slowly wandering tilt demand (0.15 rad at 0.3-0.5 Hz) through a first-order rate
+    loop of ``rate_tau_s`` behind ``delay_s`` of dead time (1 ms physics); the (rates sent, times)."""
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    w = np.zeros(3)
+    queue = []  # (time active, command)
+    active = np.zeros(3)
+    sent = []
+    for k in range(int(round(seconds / dt))):
+        t = k * dt
+        axis = [math.sin(2 * math.pi * 0.3 * t), math.cos(2 * math.pi * 0.5 * t), 0.0]
+        q_des = quat_axis_angle(axis, 0.15) if np.linalg.norm(axis) > 1e-9 else np.array([1.0, 0, 0, 0])
+        cmd = np.asarray(tracker.update(q_des, q, np.zeros(3), time_s=t), float)
+        sent.append(cmd)
+        queue.append((t + delay_s, cmd))
+        for i in range(10):
+            ti = t + i * 0.001
+            while queue and queue[0][0] <= ti + 1e-12:
+                active = queue.pop(0)[1]
+            w = w + (active - w) * (0.001 / rate_tau_s)
+            th = np.linalg.norm(w) * 0.001
+            dq = quat_axis_angle(w, th) if th > 0 else np.array([1.0, 0, 0, 0])
+            q = np.asarray(frames.quat_multiply(q, dq), float)
+            q = q / np.linalg.norm(q)
+    return sent
+
+
+@pytest.mark.parametrize("rate_tau_s,delay_s,fast", [(0.03, 0.0, True), (0.03, 0.02, False), (0.045, 0.045, False)])
+def test_the_rate_loop_is_identified_and_the_reference_engages_only_over_a_fast_one(rate_tau_s, delay_s, fast) -> None:
+    """rotorpy's loop (33 ms, no dead time) is fast; the independent simulator's (30 ms + 20 ms
+    latency) and PX4 SIH's (45 + 45 ms) are not: there the default output is the law alone, the
+    same rates to the bit (the measure can fail both ways: the identification picks the simulated pair)."""
+    tracker = AttitudeTracker.from_vehicle(VehicleModel.typical())
+    law_only = AttitudeTracker(tracker.law, None)
+    _wander(tracker, rate_tau_s, delay_s, 4.0)
+    assert tracker.rate_loop is not None and tracker.rate_loop.best == pytest.approx((rate_tau_s, delay_s), abs=0.011)
+    assert tracker.reference_engaged is fast
+    assert (tracker.rate_loop.response_s <= FAST_RATE_LOOP_S) is fast
+    if not fast:  # the whole flight flew the law alone
+        again = AttitudeTracker.from_vehicle(VehicleModel.typical())
+        a, b = _wander(again, rate_tau_s, delay_s, 4.0), _wander(law_only, rate_tau_s, delay_s, 4.0)
+        assert all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
+def test_the_identification_needs_excitation_and_restarts_after_a_gap_or_reset() -> None:
+    ident = RateLoopIdentifier()
+    level = (1.0, 0.0, 0.0, 0.0)
+    for k in range(300):  # hovering level: nothing to identify
+        ident.update(k * 0.01, level, (0.0, 0.0, 0.0))
+    assert ident.response_s is None
+    tracker = AttitudeTracker.from_vehicle(VehicleModel.typical())
+    _wander(tracker, 0.03, 0.0, 3.0)
+    assert tracker.reference_engaged
+    tracker.reset()
+    assert not tracker.reference_engaged and tracker.rate_loop.response_s is None
