@@ -322,7 +322,7 @@ class AttitudeTracker:
         if self.rate_loop is not None:
             self._engage()
             if not self._engaged:
-                out = self.law.update(q_des_enu_flu, q_meas, rates_ff_flu_rad_s)
+                out = self.law.update(q_des_enu_flu, q_meas_enu_flu, rates_ff_flu_rad_s)  # as the law alone
                 self.rate_loop.update(t, q_meas, out)
                 self.reference_enu_flu, self._t = None, t
                 return out
