@@ -6,9 +6,11 @@ One encoder per output mode (a level of the paper's Fig. 1 cascade):
   yaw rate (position and velocity ignored, type_mask 0x03F);
 - ``attitude``: SET_ATTITUDE_TARGET quaternion + normalised thrust, with the body-rate
   feed-forward the autopilot honours next to a quaternion (PX4: yaw rate only; ArduPilot: all);
-- ``rates``: the core's attitude-rate law (:class:`pf_offboard.control.AttitudeRateLaw`:
-  tilt-prioritised P on the attitude error, time constant τ, bounded body rates, plus the core's
-  ω_ff feed-forward) → SET_ATTITUDE_TARGET body rates + thrust, quaternion ignored.
+- ``rates``: the core's rates output (:class:`pf_offboard.control.AttitudeTracker`: the
+  attitude-rate law, tilt-prioritised P on the attitude error, time constant τ, bounded body
+  rates, plus the core's ω_ff feed-forward; over a rate loop it identifies as fast, through an
+  attitude reference with the modelled lag) → SET_ATTITUDE_TARGET body rates + thrust,
+  quaternion ignored.
 
 Every value is checked finite before it leaves; a non-finite command is replaced by the safe hold
 setpoint (:meth:`Encoder.hold`) and reported through ``Encoded.replaced``.
@@ -27,7 +29,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from pf_offboard import frames
 from pf_offboard.app.estimator import StateEstimate
 from pf_offboard.app.profiles import Profile
-from pf_offboard.control.attitude import DEFAULT_ATTITUDE_TIME_CONSTANT_S, AttitudeRateLaw
+from pf_offboard.control.attitude import DEFAULT_ATTITUDE_TIME_CONSTANT_S, AttitudeRateLaw, AttitudeTracker
 
 G_M_S2 = 9.81  # the paper's g; thrust normalisation divides by it
 
@@ -164,8 +166,11 @@ class Encoder:
     thrust of attitude / rates setpoints. ``tilt_from_gravity`` (default: the profile's
     :attr:`~Profile.accel_tilt_from_gravity`) makes acceleration setpoints undo the autopilot's
     tilt from g alone (:func:`tilt_from_gravity_setpoint`). ``rate_law`` is the rates-mode attitude controller;
-    without it, ``AttitudeRateLaw(time_constant_s)`` (default bounds). Pure: same inputs, same
-    message.
+    without it, ``AttitudeRateLaw(time_constant_s)`` (default bounds). ``rates_output``: what
+    turns the command into body rates (an :class:`AttitudeTracker` around ``rate_law``; without
+    it the law alone; :func:`pf_offboard.app.pipeline.fit_rates_output` gives it the core's
+    default). Pure but for that tracker's state (a function of the steps fed in, reset at
+    activation: ``replay`` reproduces it).
     """
 
     def __init__(
@@ -180,6 +185,7 @@ class Encoder:
         max_body_rate_rad_s: float | None = None,
         tilt_from_gravity: bool | None = None,
         thrust_angle_boost: bool = False,
+        rates_output: AttitudeTracker | None = None,
     ) -> None:
         if output_mode not in ("acceleration", "attitude", "rates"):
             raise ValueError(f"unknown output mode {output_mode!r}")
@@ -194,6 +200,7 @@ class Encoder:
         self.hover_thrust = hover_thrust
         self.rate_law = rate_law if rate_law is not None else AttitudeRateLaw(time_constant_s)
         self.time_constant_s = self.rate_law.time_constant_s
+        self.rates_output = rates_output if rates_output is not None else AttitudeTracker(self.rate_law, None)
         # rates mode: the envelope's bound on what is sent (safety.max_body_rate_rad_s); here, in the
         # pure encoder, so that `replay` reproduces it. None: unbounded.
         if max_body_rate_rad_s is not None and not max_body_rate_rad_s > 0.0:
@@ -223,8 +230,12 @@ class Encoder:
         return Encoder(
             self.output_mode, self.profile, self.target_system, self.target_component,
             hover_thrust=hover_thrust, rate_law=self.rate_law, max_body_rate_rad_s=self.max_body_rate_rad_s,
-            tilt_from_gravity=tilt_from_gravity, thrust_angle_boost=thrust_angle_boost,
+            tilt_from_gravity=tilt_from_gravity, thrust_angle_boost=thrust_angle_boost, rates_output=self.rates_output,
         )  # fmt: skip
+
+    def reset(self) -> None:
+        """Activation: the rates output starts over (its attitude reference and rate-loop identification)."""
+        self.rates_output.reset()
 
     def _unboost(self, thrust_m_s2: float, q_target_enu_flu: Any) -> float:
         """The thrust to send so that the autopilot's angle boost (if any) flies ``thrust_m_s2``."""
@@ -286,7 +297,7 @@ class Encoder:
             return Encoded(self._attitude_msg(time_boot_ms, mask, q_des, sent, thrust), thrust, sent)  # type: ignore[arg-type]
         # rates: our own attitude loop closes on the measured attitude
         assert est.q_enu_flu is not None
-        rates_flu = self.rate_law.update(q_des, est.q_enu_flu, cmd.body_rates)
+        rates_flu = self.rates_output.update(q_des, est.q_enu_flu, cmd.body_rates, time_s=est.time_s)
         # thrust along the current body z: the part of the demand the vehicle can produce now
         projection = float(np.dot(body_z(q_des), body_z(est.q_enu_flu)))
         # the autopilot's target attitude in rates mode integrates the rates sent: about the measured one

@@ -60,6 +60,23 @@ def fit_identification_to_output(follower: Any, output_mode: str, profile: Any, 
         comp.identify_lags_up_to(time_constant_s)
 
 
+def rates_output_for(follower: Any, profile: Any, rate_law: Any) -> Any:
+    """The ``rates`` output's attitude controller for this follower and autopilot: the core's
+    default (:meth:`pf_offboard.control.AttitudeTracker.from_vehicle` on the follower's inner-loop
+    model: the law, and an attitude reference with the modelled lag once the rate loop is
+    identified fast), around ``rate_law``. The law alone when the follower has no inner-loop model
+    or the autopilot flies rates through its own attitude target
+    (``Profile.rates_through_attitude_target``, ArduCopter: the response to the reference's faster
+    rates is its attitude loop's, not a rate loop's). Used by :class:`Pipeline` and the batch engine."""
+    from pf_offboard.control.attitude import REFERENCE_LAG_FRACTION, AttitudeTracker
+
+    model = getattr(getattr(follower, "compensator", None), "model", None)
+    lag = float(getattr(model, "accel_lag_xy_s", 0.0) or 0.0)
+    if lag <= 0.0 or getattr(profile, "rates_through_attitude_target", False):
+        return AttitudeTracker(rate_law, None)
+    return AttitudeTracker(rate_law, REFERENCE_LAG_FRACTION * lag, identify_rate_loop=True)
+
+
 class Pipeline:
     """Estimator → core → encoder, stepped once per fresh state sample.
 
@@ -80,6 +97,8 @@ class Pipeline:
         self.follower = follower
         self.encoder = encoder
         fit_identification_to_output(follower, encoder.output_mode, encoder.profile, encoder.time_constant_s)
+        if encoder.output_mode == "rates":
+            encoder.rates_output = rates_output_for(follower, encoder.profile, encoder.rate_law)
         self.estimator = estimator if estimator is not None else Estimator()
         self._stepped_sample = 0
         self.replaced_steps = 0  # steps where the safe hold was sent instead of the command
@@ -114,6 +133,8 @@ class Pipeline:
             return None
         self._stepped_sample = est.sample
         events = [event] if event else []
+        if active and not self._was_active:
+            self.encoder.reset()  # the rates output starts over at activation
         if active and not self._was_active and self._timed:
             # activation: what the observer learnt while the setpoints were not flown (a throw in
             # free fall, the proof-of-life stream) is not the vehicle's response: start over

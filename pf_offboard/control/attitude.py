@@ -297,12 +297,13 @@ class AttitudeTracker:
             self.rate_loop.reset()
 
     def _engage(self) -> None:
-        """Follow the identification (with hysteresis): engage at a response of at most
-        :data:`FAST_RATE_LOOP_S`, disengage above :data:`SLOW_RATE_LOOP_S`."""
+        """Follow the identification (with hysteresis): engage at a response (lag + dead time) of at
+        most :data:`FAST_RATE_LOOP_S` with a dead time of at most :data:`FAST_RATE_LOOP_MAX_DELAY_S`,
+        disengage above :data:`SLOW_RATE_LOOP_S`."""
         r = self.rate_loop.response_s if self.rate_loop is not None else None
-        if r is None:
+        if r is None or self.rate_loop is None or self.rate_loop.best is None:
             return
-        if not self._engaged and r <= FAST_RATE_LOOP_S:
+        if not self._engaged and r <= FAST_RATE_LOOP_S and self.rate_loop.best[1] <= FAST_RATE_LOOP_MAX_DELAY_S:
             self._engaged = True
             self.reference_enu_flu = None  # restart the reference at the measured attitude
         elif self._engaged and r > SLOW_RATE_LOOP_S:
@@ -353,6 +354,9 @@ FAST_RATE_LOOP_S = 0.04
 """A rate loop whose identified lag + dead time is at most this (s) is fast enough for the
 attitude reference (:class:`AttitudeTracker`): rotorpy's (33 ms, no dead time) is, the independent
 simulator's (30 ms + 20 ms latency) and the autopilots' (PX4 SIH ≈ 45 + 45 ms) are not."""
+FAST_RATE_LOOP_MAX_DELAY_S = 0.01
+"""… and whose identified dead time is at most this (s): dead time is what the reference's faster
+tilt cannot stand (the independent simulator's 20 ms latency, SIH's 80 ms)."""
 SLOW_RATE_LOOP_S = 0.06
 """An engaged reference is dropped again when the identified response exceeds this (s)."""
 RATE_LOOP_MEMORY_S = 3.0

@@ -55,6 +55,13 @@ class ArduPilotOffboard:
         self.encoder = Encoder(self.output_mode, setup.profile, 1, 1, hover_thrust=setup.hover_thrust,
                                time_constant_s=setup.flight.attitude_time_constant_s,
                                tilt_from_gravity=setup.tilt_from_gravity)  # fmt: skip
+        # the pipeline's rates output: ArduCopter's is the law alone (rates_through_attitude_target),
+        # stateless, so one encoder serves every flight
+        from pf_offboard.app.pipeline import rates_output_for
+
+        self.encoder.rates_output = rates_output_for(setup.follower, setup.profile, self.encoder.rate_law)
+        if self.encoder.rates_output.reference_lag_s is not None:
+            raise ValueError("the batch engine's ArduPilot handling shares one encoder: a stateful rates output needs one per flight")
         self.guided = [ArduGuided() for _ in range(n)]
         self._mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
         self._mav.robust_parsing = True

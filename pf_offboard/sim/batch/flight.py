@@ -175,15 +175,17 @@ def _estimated_attitude(q_ned_frd: Arr) -> list[Any]:
     return out
 
 
-def _rates_setpoint(setup: _Setup, cmd: Any, n: int, q_est: list[Any]) -> BatchSetpoint:
-    """``rates`` output: the encoder's own attitude loop (:class:`AttitudeRateLaw`, per flight with
-    the scalar functions: it is stateless and exact), the thrust along the current body z, float32
-    on the wire; the mock's PX4 handling (a rate setpoint)."""
+def _rates_setpoint(setup: _Setup, cmd: Any, n: int, q_est: list[Any], t_est: float) -> BatchSetpoint:
+    """``rates`` output: the encoder's own attitude loop (the pipeline's rates output, an
+    :class:`~pf_offboard.control.AttitudeTracker` per flight: the scalar code, exact), the thrust
+    along the current body z, float32 on the wire; the mock's PX4 handling (a rate setpoint)."""
     from pf_offboard.app.encoders import _THRUST_PROJECTION_FLOOR, body_z, thrust_normalised
+    from pf_offboard.app.pipeline import rates_output_for
     from pf_offboard.control.attitude import AttitudeRateLaw
 
-    law = setup.rate_law if hasattr(setup, "rate_law") else AttitudeRateLaw(setup.flight.attitude_time_constant_s)
-    setup.rate_law = law  # type: ignore[attr-defined]
+    if not hasattr(setup, "rate_outputs"):  # one per flight from its first active step (the pipeline resets it at activation)
+        law = AttitudeRateLaw(setup.flight.attitude_time_constant_s)
+        setup.rate_outputs = [rates_output_for(setup.follower, setup.profile, law) for _ in range(n)]  # type: ignore[attr-defined]
     rates = np.zeros((3, n))
     thrust = np.zeros(n)
     for i in range(n):
@@ -191,7 +193,7 @@ def _rates_setpoint(setup: _Setup, cmd: Any, n: int, q_est: list[Any]) -> BatchS
         if q is None:  # never in a mirrored flight: the scalar encoder would hold
             raise FloatingPointError("no attitude estimate")
         q_des = cmd.attitude[i]
-        r = law.update(q_des, q, cmd.body_rates[i])
+        r = setup.rate_outputs[i].update(q_des, q, cmd.body_rates[i], time_s=t_est)
         projection = float(np.dot(body_z(q_des), body_z(q)))
         thrust[i] = thrust_normalised(float(cmd.thrust[i]) * max(projection, _THRUST_PROJECTION_FLOOR), setup.hover_thrust)
         frd = frames.flu_to_frd(r)
@@ -399,7 +401,7 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
         elif setup.flight.output_mode == "attitude":
             sp = _attitude_setpoint(setup, cmd, n)
         elif setup.flight.output_mode == "rates":
-            sp = _rates_setpoint(setup, cmd, n, q_est)
+            sp = _rates_setpoint(setup, cmd, n, q_est, t_est)
         else:
             a = cmd.acceleration
             ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
