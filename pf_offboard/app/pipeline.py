@@ -106,6 +106,7 @@ class Pipeline:
         self._timed = getattr(follower, "compensator", None) is not None or bool(getattr(follower, "needs_time", False))
         self._was_active = False
         self._identified: Any = None  # the last adopted inner-loop model logged
+        self._rates_reference = False  # the rates output's attitude reference engaged (logged when it changes)
         speed = getattr(follower, "speed", math.nan)
         self.speed_ref_m_s = float(speed) if isinstance(speed, (int, float)) else math.nan
         # with a speed profile the reference varies along the path: log each step's eta2_ref
@@ -135,6 +136,7 @@ class Pipeline:
         events = [event] if event else []
         if active and not self._was_active:
             self.encoder.reset()  # the rates output starts over at activation
+            self._rates_reference = False
         if active and not self._was_active and self._timed:
             # activation: what the observer learnt while the setpoints were not flown (a throw in
             # free fall, the proof-of-life stream) is not the vehicle's response: start over
@@ -163,6 +165,12 @@ class Pipeline:
         if model is not None and model is not self._identified:  # an adoption: logged once, for the summary and replay
             self._identified = model
             events.append(identified_event(model.lag_s, model.delay_s, model.drag_1_s))
+        engaged = bool(getattr(self.encoder.rates_output, "reference_engaged", False)) and self.encoder.output_mode == "rates"
+        if engaged != self._rates_reference:  # the rates output engaged (dropped) its attitude reference
+            self._rates_reference = engaged
+            best = getattr(getattr(self.encoder.rates_output, "rate_loop", None), "best", None)
+            loop = f" (rate loop lag {best[0]:.3f} s, dead time {best[1]:.3f} s)" if best is not None else ""
+            events.append(f"rates_reference: {'on' if engaged else 'off'}{loop}")
         if encoded.replaced:
             self.replaced_steps += 1
             events.append(f"hold: {encoded.replaced}")

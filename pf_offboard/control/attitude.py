@@ -34,6 +34,10 @@ the phase margin is gone and the vehicle tumbles; ``τ = 0.2–0.25 s`` flew on 
 The default, :data:`DEFAULT_ATTITUDE_TIME_CONSTANT_S`, is 0.25 s; with an identified rate loop
 use :meth:`AttitudeRateLaw.for_rate_loop` (``τ = 4·τ_r``, at least
 :data:`MIN_ATTITUDE_TIME_CONSTANT_S`).
+
+The default ``rates`` output, :meth:`AttitudeTracker.from_vehicle`, is this law plus an attitude
+reference with the compensator's modelled lag, engaged only over a rate loop it identifies in
+flight as fast and free of dead time (:class:`RateLoopIdentifier`).
 """
 
 from __future__ import annotations
@@ -230,30 +234,40 @@ def _quat_mul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float,
 
 
 class AttitudeTracker:
-    """``rates`` output whose response is the lag the follower's compensator models (opt-in).
+    """The default ``rates`` output (:meth:`from_vehicle`; the app's too): the law, and over a rate
+    loop identified fast an attitude reference whose response is the lag the follower's
+    compensator models.
 
     :class:`AttitudeRateLaw` alone makes the tilt follow the demand as a first-order lag of its
     ``τ`` (0.25 s: it must stay slow over a real autopilot's rate loop), while the follower's
     :class:`~pf_offboard.control.compensator.InnerLoopCompensator` predicts, leads and inverts a
     lag of ``accel_lag_xy_s`` (0.1 s typical) and its identifier may only shorten the dead time:
     in rotorpy (33 ms rate loop) the law alone flew the figure-eight at 1.4 cm, identified or not.
-    The tracker separates the two: an attitude reference ``q_r`` follows the demand with lag
+    The reference separates the two: an attitude reference ``q_r`` follows the demand with lag
     ``reference_lag_s`` (the same law with that τ, integrated here: no measurement, so no loop
     to destabilise), its rate is the feed-forward, and the law's feedback (τ) only pulls the
-    vehicle onto the reference. In rotorpy with ``identify_online`` it flies 0.26 cm (0.44 cm in a
-    3 m/s wind), as the acceleration output does.
+    vehicle onto the reference. In rotorpy the follower's identification then adopts the dead time:
+    0.27 cm (0.44 cm in a 3 m/s wind), as the acceleration output does.
 
-    **Not the app's default**: on vehicles whose own rate/tilt response is slower the faster
-    attitude hurt — real ArduCopter SITL figure-eight 2.5 cm, 8.7 cm/s against the law's 2.3 cm,
-    4.6 cm/s; the mock's px4-sih preset 3-6 cm, 16-20 cm/s against 1.4-3.3 cm, 2-14 cm/s; the
-    independent simulator of tests/control/test_independent_quad.py 8.5 cm once identified (0.5 cm
-    with a 0.1 s reference). Use it over a fast, delay-free rate loop (another simulator's).
+    **Only over a fast rate loop without dead time.** Where the rate loop had dead time the
+    reference's faster tilt hurt: the independent simulator of tests/control/test_independent_quad.py
+    (30 ms + 20 ms latency) oscillated up to the rate bound once the follower adopted a 0-0.04 s dead
+    time (9 cm; 1.7 cm with the identification off, 0.9 cm with the law alone); the mock's px4-sih
+    preset (80 ms dead time) had its 1.2-1.8 Hz ripple of the commanded acceleration tripled with no
+    adoption at all (3-6 cm, 16-20 cm/s against 1.4-3.3 cm, 3-14 cm/s); real ArduCopter SITL, whose
+    rates go through its own attitude target, flew 2.5-3.0 cm, 8.7-10.2 cm/s against 2.3 cm, 4.6 cm/s
+    (docs/design-decisions.md). So with ``identify_rate_loop`` (the :meth:`from_vehicle` default)
+    it flies the law alone, identifies the rate loop (:class:`RateLoopIdentifier`, from the
+    measured attitudes and the rates it sent) and engages the reference only once that loop's lag +
+    dead time is at most :data:`FAST_RATE_LOOP_S` with a dead time of at most
+    :data:`FAST_RATE_LOOP_MAX_DELAY_S` (rotorpy after about 1 s); it drops it again above
+    :data:`SLOW_RATE_LOOP_S`. Disengaged, its output is the law's, bit for bit.
     Body FLU, world ENU, rad/s, quaternions (w, x, y, z).
 
     ``reference_lag_s`` None: the law alone (stateless). Stateful: call :meth:`update` once per
     control step with the sample's time; :meth:`reset` at activation or after another setpoint.
 
-        tracker = AttitudeTracker.from_vehicle(VehicleModel.typical())   # τ 0.25 s, reference 0.075 s
+        tracker = AttitudeTracker.from_vehicle(VehicleModel.typical())   # τ 0.25 s, reference 0.075 s when fast
         rates_flu = tracker.update(cmd.attitude, q_meas_enu_flu, cmd.body_rates, time_s=t)
     """
 

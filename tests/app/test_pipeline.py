@@ -116,3 +116,33 @@ def test_the_rates_output_through_an_attitude_target_lets_the_identifier_adopt_a
     Pipeline(follower, Encoder(mode, profile, 1, 1, hover_thrust=0.5))
     assert follower.compensator is not None and follower.compensator.identifier is not None
     assert follower.compensator.identifier.lags == lags
+
+
+@pytest.mark.parametrize("profile,reference_lag_s", [(PX4, 0.075), (ARDUPILOT, None)])
+def test_the_rates_output_is_the_cores_default_and_starts_over_at_activation(profile, reference_lag_s) -> None:
+    """The app's rates output is the core's default (AttitudeTracker.from_vehicle on the follower's
+    model: a 0.075 s reference, engaged once the rate loop is identified fast); ArduCopter, which
+    flies rates through its own attitude target, keeps the law alone. Activation resets it."""
+    from pf_offboard import Path, PathFollower
+    from pf_offboard.control import AttitudeTracker, Compensation, VehicleModel
+
+    follower = PathFollower(Path.from_waypoints([(0, 0, 2), (2, 0, 2), (2, 2, 2), (0, 2, 2)], closed=True), 1.0)
+    pipe = Pipeline(follower, Encoder("rates", profile, 1, 1, hover_thrust=0.5))
+    out = pipe.encoder.rates_output
+    assert isinstance(out, AttitudeTracker) and out.law is pipe.encoder.rate_law
+    assert out.reference_lag_s == (None if reference_lag_s is None else pytest.approx(reference_lag_s))
+    assert (out.rate_loop is not None) is (reference_lag_s is not None)
+    default = AttitudeTracker.from_vehicle(VehicleModel.typical())
+    if reference_lag_s is not None:
+        assert default.reference_lag_s == pytest.approx(out.reference_lag_s)
+    # the encoder copies the dialect makes keep it
+    assert pipe.encoder.with_hover_thrust(0.4).rates_output is out
+    resets = []
+    out.reset = lambda: resets.append(1)  # type: ignore[method-assign]
+    for msg in telemetry():
+        pipe.on_message(msg)
+        pipe.step(active=len(resets) > 0 or msg.get_type() == "LOCAL_POSITION_NED" and msg.time_boot_ms >= 40)
+    assert resets == [1]
+    # without an inner-loop model (no compensation) there is no lag to answer with: the law alone
+    bare = PathFollower(Path.from_waypoints([(0, 0, 2), (2, 0, 2), (2, 2, 2)]), 1.0, compensation=Compensation.off())
+    assert Pipeline(bare, Encoder("rates", PX4, 1, 1, hover_thrust=0.5)).encoder.rates_output.reference_lag_s is None

@@ -25,6 +25,7 @@ PAPER = ROOT / "configs" / "paper.yaml"
 
 @pytest.mark.parametrize(("vehicle", "output", "flights"), [
     ("px4-sih", None, 2), ("arducopter", None, 1), ("px4-sih", "attitude", 1), ("arducopter", "rates", 1),
+    ("fast", "rates", 1),  # the rates output's attitude reference engages (a fast rate loop): stateful, per flight
 ])
 def test_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(vehicle: str, output: str | None, flights: int,
                                                                        scalar_flight) -> None:  # fmt: skip
