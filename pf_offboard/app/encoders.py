@@ -355,6 +355,7 @@ class Encoder:
             return Encoded(self._attitude_msg(time_boot_ms, mask, level, (0.0, 0.0, 0.0), self.hover_thrust), self.hover_thrust, None, reason or "hold")
         rates_frd = frames.flu_to_frd(self.rate_law.update(level, est.q_enu_flu, (0.0, 0.0, 0.0)))
         sent = (float(rates_frd[0]), float(rates_frd[1]), float(rates_frd[2]))
+        self.rates_output.reset()  # rates it did not send: its identification and reference start over
         msg = self._attitude_msg(time_boot_ms, ATTITUDE_IGNORE, np.array([1.0, 0, 0, 0]), sent, self.hover_thrust, ned=True)
         return Encoded(msg, self.hover_thrust, sent, reason or "hold")
 
