@@ -250,9 +250,10 @@ def test_the_tracker_without_a_reference_is_the_law_and_restarts_after_a_gap() -
         tracker.update(q_des, level, np.zeros(3), time_s=math.nan)
 
 
-def _wander(tracker, rate_tau_s: float, delay_s: float, seconds: float, dt: float = 0.01):
+def _wander(tracker, rate_tau_s: float, delay_s: float, seconds: float, dt: float = 0.01, then=None):
     """Fly a slowly wandering tilt demand (0.15 rad at 0.3-0.5 Hz) through a first-order rate
-    loop of ``rate_tau_s`` behind ``delay_s`` of dead time (1 ms physics); the (rates sent, times)."""
+    loop of ``rate_tau_s`` behind ``delay_s`` of dead time (1 ms physics); ``then``: (time s, its
+    new rate_tau_s, delay_s) the loop changes to. The rates sent."""
     q = np.array([1.0, 0.0, 0.0, 0.0])
     w = np.zeros(3)
     queue = []  # (time active, command)
@@ -260,6 +261,8 @@ def _wander(tracker, rate_tau_s: float, delay_s: float, seconds: float, dt: floa
     sent = []
     for k in range(int(round(seconds / dt))):
         t = k * dt
+        if then is not None and t >= then[0]:
+            rate_tau_s, delay_s = then[1], then[2]
         axis = [math.sin(2 * math.pi * 0.3 * t), math.cos(2 * math.pi * 0.5 * t), 0.0]
         q_des = quat_axis_angle(axis, 0.15) if np.linalg.norm(axis) > 1e-9 else np.array([1.0, 0, 0, 0])
         cmd = np.asarray(tracker.update(q_des, q, np.zeros(3), time_s=t), float)
@@ -305,3 +308,16 @@ def test_the_identification_needs_excitation_and_restarts_after_a_gap_or_reset()
     assert tracker.reference_engaged
     tracker.reset()
     assert not tracker.reference_engaged and tracker.rate_loop.response_s is None
+
+
+def test_the_reference_is_dropped_when_the_rate_loop_slows_down() -> None:
+    """Hysteresis: engaged over a 30 ms loop, dropped once the same flight's loop answers after
+    45 + 45 ms (identified above SLOW_RATE_LOOP_S), and the output is the law's again."""
+    tracker = AttitudeTracker.from_vehicle(VehicleModel.typical())
+    _wander(tracker, 0.03, 0.0, 3.0)
+    assert tracker.reference_engaged
+    tracker.reset()
+    _wander(tracker, 0.03, 0.0, 9.0, then=(3.0, 0.045, 0.045))
+    assert not tracker.reference_engaged and sum(tracker.rate_loop.best) > 0.06
+    q_des, level = quat_axis_angle([1, 0, 0], 0.2), np.array([1.0, 0, 0, 0])
+    assert np.array_equal(tracker.update(q_des, level, np.zeros(3), time_s=9.0), tracker.law.update(q_des, level, np.zeros(3)))
