@@ -260,8 +260,10 @@ class AttitudeTracker:
     it flies the law alone, identifies the rate loop (:class:`RateLoopIdentifier`, from the
     measured attitudes and the rates it sent) and engages the reference only once that loop's lag +
     dead time is at most :data:`FAST_RATE_LOOP_S` with a dead time of at most
-    :data:`FAST_RATE_LOOP_MAX_DELAY_S` (rotorpy after about 1 s); it drops it again above
-    :data:`SLOW_RATE_LOOP_S`. Disengaged, its output is the law's, bit for bit.
+    :data:`FAST_RATE_LOOP_MAX_DELAY_S` (rotorpy after about 1 s); it drops it for good (until
+    :meth:`reset`) when the response then exceeds :data:`SLOW_RATE_LOOP_S` (real ArduCopter, whose
+    rates answered the law's commands in 30-40 ms and the reference's in 60-70 ms, switched back
+    and forth otherwise). Disengaged, its output is the law's, bit for bit.
     Body FLU, world ENU, rad/s, quaternions (w, x, y, z).
 
     ``reference_lag_s`` None: the law alone (stateless). Stateful: call :meth:`update` once per
@@ -307,21 +309,26 @@ class AttitudeTracker:
         self._t: float | None = None
         self._w_ref = (0.0, 0.0, 0.0)
         self._engaged = False
+        self._dropped = False
         if self.rate_loop is not None:
             self.rate_loop.reset()
 
     def _engage(self) -> None:
         """Follow the identification (with hysteresis): engage at a response (lag + dead time) of at
         most :data:`FAST_RATE_LOOP_S` with a dead time of at most :data:`FAST_RATE_LOOP_MAX_DELAY_S`,
-        disengage above :data:`SLOW_RATE_LOOP_S`."""
+        disengage above :data:`SLOW_RATE_LOOP_S` for the rest of the flight (until :meth:`reset`)."""
         r = self.rate_loop.response_s if self.rate_loop is not None else None
         if r is None or self.rate_loop is None or self.rate_loop.best is None:
             return
-        if not self._engaged and r <= FAST_RATE_LOOP_S and self.rate_loop.best[1] <= FAST_RATE_LOOP_MAX_DELAY_S:
+        if (not self._engaged and not self._dropped and r <= FAST_RATE_LOOP_S
+                and self.rate_loop.best[1] <= FAST_RATE_LOOP_MAX_DELAY_S):  # fmt: skip
             self._engaged = True
             self.reference_enu_flu = None  # restart the reference at the measured attitude
         elif self._engaged and r > SLOW_RATE_LOOP_S:
+            # dropped for good (until reset): a loop that answers the reference's faster rates
+            # slower than the law's would otherwise switch back and forth (real ArduCopter did)
             self._engaged = False
+            self._dropped = True
 
     def update(self, q_des_enu_flu: ArrayLike, q_meas_enu_flu: ArrayLike, rates_ff_flu_rad_s: ArrayLike,
                time_s: float) -> NDArray[np.float64]:  # fmt: skip

@@ -311,8 +311,8 @@ def test_the_identification_needs_excitation_and_restarts_after_a_gap_or_reset()
 
 
 def test_the_reference_is_dropped_when_the_rate_loop_slows_down() -> None:
-    """Hysteresis: engaged over a 30 ms loop, dropped once the same flight's loop answers after
-    45 + 45 ms (identified above SLOW_RATE_LOOP_S), and the output is the law's again."""
+    """Engaged over a 30 ms loop, dropped once the same flight's loop answers after 45 + 45 ms
+    (identified above SLOW_RATE_LOOP_S), and the output is the law's again, for the rest of the flight."""
     tracker = AttitudeTracker.from_vehicle(VehicleModel.typical())
     _wander(tracker, 0.03, 0.0, 3.0)
     assert tracker.reference_engaged
@@ -321,3 +321,10 @@ def test_the_reference_is_dropped_when_the_rate_loop_slows_down() -> None:
     assert not tracker.reference_engaged and sum(tracker.rate_loop.best) > 0.06
     q_des, level = quat_axis_angle([1, 0, 0], 0.2), np.array([1.0, 0, 0, 0])
     assert np.array_equal(tracker.update(q_des, level, np.zeros(3), time_s=9.0), tracker.law.update(q_des, level, np.zeros(3)))
+    # dropped for good: the loop fast again does not bring it back (no switching back and forth) until a reset
+    tracker.rate_loop.response_s, tracker.rate_loop.best = 0.03, (0.03, 0.0)
+    tracker._engage()
+    assert not tracker.reference_engaged
+    tracker.reset()
+    _wander(tracker, 0.03, 0.0, 3.0)
+    assert tracker.reference_engaged
