@@ -168,7 +168,7 @@ class Encoder:
     tilt from g alone (:func:`tilt_from_gravity_setpoint`). ``rate_law`` is the rates-mode attitude controller;
     without it, ``AttitudeRateLaw(time_constant_s)`` (default bounds). ``rates_output``: what
     turns the command into body rates (an :class:`AttitudeTracker` around ``rate_law``; without
-    it the law alone; :func:`pf_offboard.app.pipeline.fit_rates_output` gives it the core's
+    it the law alone; :func:`pf_offboard.app.pipeline.rates_output_for` gives it the core's
     default). Pure but for that tracker's state (a function of the steps fed in, reset at
     activation: ``replay`` reproduces it).
     """

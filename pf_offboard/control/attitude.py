@@ -367,6 +367,7 @@ class AttitudeTracker:
             self.rate_loop.update(t, q_meas, out)
         return out
 
+
 RATE_LOOP_LAGS_S = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.08, 0.1, 0.15)
 """Candidate time constants (s) of the autopilot's closed body-rate loop (:class:`RateLoopIdentifier`)."""
 RATE_LOOP_DELAYS_S = (0.0, 0.01, 0.02, 0.03, 0.04, 0.06, 0.08)
@@ -424,6 +425,9 @@ class RateLoopIdentifier:
         return 0.0, 0.0
 
     def update(self, time_s: float, q_meas_enu_flu: tuple[float, float, float, float], rates_sent_flu_rad_s: ArrayLike) -> None:
+        """One control step: the sample's time (s), the measured attitude (unit (w, x, y, z), body
+        FLU → world ENU) and the rates sent at this step (body FLU, rad/s). A gap longer than
+        :data:`MAX_REFERENCE_GAP_S` (or time going back) starts over."""
         t = float(time_s)
         q = q_meas_enu_flu
         if self._t is not None and (t - self._t > MAX_REFERENCE_GAP_S or t < self._t):
