@@ -55,7 +55,7 @@ MIN_GAIN, MAX_GAIN = 0.5, 1.5
 # memory, the best candidate (or one a delay step beside it) best for SETTLE_S, and its gain and
 # drag within these spreads meanwhile
 LONGER_MIN_DATA_S = 6.0
-LONGER_RATIO = 0.65
+LONGER_RATIO = 0.75
 MIN_EXCITATION_M_S2 = 0.7
 SETTLE_S = 2.0
 SETTLE_GAIN_SPREAD = 0.05
