@@ -148,9 +148,11 @@ def test_without_the_identification_the_typical_model_misses_them():
 
 @pytest.mark.parametrize("wind_m_s", [0.0, 3.0])
 def test_defaults_with_rates_output(wind_m_s):
-    """With rates output the response is the attitude law's 0.25 s lag, slower than the guess; the
-    identification only ever shortens the dead time, so nothing is adopted. Measured (window
-    6-12 s): 1.4 cm, 2.1 cm/s still; 1.7 cm, mean +0.6 cm/s in the wind."""
+    """With rates output the response is the attitude law's 0.25 s lag, slower than the guess:
+    nothing shorter is adopted, and the joint bank reads it late (9-11 s) as a 0.13 s dead time with
+    gain 0.93 and drag 0.4-0.5 1/s. Measured (window 6-12 s): 1.36 cm, 2.29 cm/s still; 1.86 cm,
+    2.59 cm/s, mean +0.6 cm/s in the wind (before the joint bank, nothing adopted: 1.37 cm,
+    2.13 cm/s; 1.74 cm, 1.97 cm/s)."""
     follower = None
 
     def make(path: Path) -> PathFollower:
@@ -159,7 +161,8 @@ def test_defaults_with_rates_output(wind_m_s):
         return follower
 
     ct, rms, mean = _run(make, "rates", wind_m_s, "defaults")
-    assert follower.compensator.identified is None  # type: ignore[union-attr]
+    model = follower.compensator.identified  # type: ignore[union-attr]
+    assert model is None or (model.delay_s > 0.1 and model.adopted_at_s >= 6.0)  # never a shorter dead time
     assert ct <= 0.025 and rms <= 0.035 and abs(mean) <= 0.03
 
 
