@@ -164,7 +164,7 @@ class Pipeline:
         model = getattr(getattr(self.follower, "compensator", None), "identified", None)
         if model is not None and model is not self._identified:  # an adoption: logged once, for the summary and replay
             self._identified = model
-            events.append(identified_event(model.lag_s, model.delay_s, model.drag_1_s))
+            events.append(identified_event(model.lag_s, model.delay_s, model.drag_1_s, model.gain_xy, model.gain_z, model.drag_z_1_s))
         engaged = bool(getattr(self.encoder.rates_output, "reference_engaged", False)) and self.encoder.output_mode == "rates"
         if engaged != self._rates_reference:  # the rates output engaged (dropped) its attitude reference
             self._rates_reference = engaged

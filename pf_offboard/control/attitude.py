@@ -241,8 +241,9 @@ class AttitudeTracker:
     :class:`AttitudeRateLaw` alone makes the tilt follow the demand as a first-order lag of its
     ``τ`` (0.25 s: it must stay slow over a real autopilot's rate loop), while the follower's
     :class:`~pf_offboard.control.compensator.InnerLoopCompensator` predicts, leads and inverts a
-    lag of ``accel_lag_xy_s`` (0.1 s typical) and its identifier may only shorten the dead time:
-    in rotorpy (33 ms rate loop) the law alone flew the figure-eight at 1.4 cm, identified or not.
+    lag of ``accel_lag_xy_s`` (0.1 s typical), and its identifier varies the dead time, gain and
+    drag but not the lag: in rotorpy (33 ms rate loop) the law alone flew the figure-eight at
+    1.4 cm, identified or not.
     The reference separates the two: an attitude reference ``q_r`` follows the demand with lag
     ``reference_lag_s`` (the same law with that τ, integrated here: no measurement, so no loop
     to destabilise), its rate is the feed-forward, and the law's feedback (τ) only pulls the

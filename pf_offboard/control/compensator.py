@@ -55,6 +55,8 @@ OFFSET_INTEGRAL_BAND_M = 0.2
 # How fast the identified lag and dead time may move the model (s per s of flight).
 ADAPT_SLEW = 0.1
 ADAPT_DRAG_SLEW = 0.5  # 1/s per s
+ADAPT_GAIN_SLEW = 0.1  # horizontal gain per s
+ADOPT_VERTICAL = True  # a joint model's vertical gain and drag are adopted with it
 # identify_lags_up_to: a lag longer than the model's, up to LONG_LAG_MAX_FACTOR x it, is adopted
 # only with a dead time of at least LONG_LAG_MIN_DELAY_S and a response (lag + dead time) at most
 # LONG_LAG_RESPONSE_SLACK_S longer than the model's: 0.15 s with 0.06-0.08 s. Real ArduCopter SITL's
@@ -105,13 +107,15 @@ class InnerLoopCompensator:
         self.drag: Vec = (model.drag_xy_1_s, model.drag_xy_1_s, model.drag_z_1_s)
         self.observer_rad_s = float(observer_rad_s)
         self.max_disturbance_m_s2 = float(max_disturbance_m_s2)
-        # in-flight identification of the dead time and drag (adaptive.py; None: the model's). It
-        # may only shorten the dead time: the gains were derived for the model, and a slower
-        # response needs lower gains, not a longer prediction (a longer one, adopted on the
-        # mock's PX4 SIH preset, flew worse on 12 of 34 held-out flights)
+        # in-flight identification of the dead time, gain and drag together (adaptive.py; None: the
+        # model's). A shorter dead time is adopted readily; a longer one only once settled and
+        # decisively better: alone (unit gain, no drag) it flew worse (the mock's PX4 SIH preset,
+        # 12 of 34 held-out flights; real SIH 8.1 cm), PX4 SIH's whole response flies best
+        # (docs/design-decisions.md)
         self.identifier: ResponseIdentifier | None = ResponseIdentifier(
             model.accel_gain_xy, delays_s=[d for d in DELAYS_S if d <= self.delay_s], lags_s=(model.accel_lag_xy_s,),
-            initial=(model.accel_lag_xy_s, self.delay_s)) if adapt else None  # fmt: skip
+            initial=(model.accel_lag_xy_s, self.delay_s), longer_delays_s=[d for d in DELAYS_S if d > self.delay_s],
+        ) if adapt else None  # fmt: skip
         self._target: tuple[float, float] | None = None
         # what the identifier adopted last (its drag then; None: the model flown is the given one)
         self.identified: IdentifiedModel | None = None
@@ -149,7 +153,8 @@ class InnerLoopCompensator:
         self.identifier = ResponseIdentifier(old.gain, delays_s=old.delays, lags_s=lags,
                                              initial=(base, self.delay_s),
                                              min_long_lag_delay_s=LONG_LAG_MIN_DELAY_S,
-                                             max_long_lag_response_s=base + self.delay_s + LONG_LAG_RESPONSE_SLACK_S)  # fmt: skip
+                                             max_long_lag_response_s=base + self.delay_s + LONG_LAG_RESPONSE_SLACK_S,
+                                             longer_delays_s=old.longer_delays_s)  # fmt: skip
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -257,18 +262,34 @@ class InnerLoopCompensator:
         ADAPT_SLEW (s per s): the prediction horizon never jumps."""
         assert self.identifier is not None
         best = self.identifier.update(time_s, velocity, self._pieces)
+        ident = self.identifier
         if best is not None:
             self._target = best
-            self.identified = IdentifiedModel(best[0], best[1], self.identifier.drag_1_s or 0.0, time_s)
+            z = ident.vertical
+            self.identified = IdentifiedModel(best[0], best[1], ident.drag_1_s or 0.0, time_s, ident.gain_xy or 1.0,
+                                              *(z if z is not None else (self.gain[2], self.drag[2])))  # fmt: skip
         if self._target is None:
             return
-        self._move_to_target(time_s - t_prev, self._target, self.identifier.drag_1_s)
+        self._move_to_target(time_s - t_prev, self._target, ident.drag_1_s, ident.gain_xy, ident.vertical)
 
-    def _move_to_target(self, dt: float, target: tuple[float, float], drag: float | None) -> None:
+    def _move_to_target(self, dt: float, target: tuple[float, float], drag: float | None, gain: float | None = None,
+                        vertical: tuple[float, float] | None = None) -> None:  # fmt: skip
         """What an adoption does to the compensator: the lag, the dead time (every axis, held back
-        by none) and the horizontal drag move towards the adopted candidate's at their slew rates.
-        The one place that maps an identified model to the compensator's parameters (mirrored by
+        by none), the horizontal drag and gain (and a joint model's vertical gain and drag) move
+        towards the adopted candidate's at their slew rates. The one place that maps an identified
+        model to the compensator's parameters (mirrored by
         ``pf_offboard.sim.batch.follower._Compensator._move_to_target``)."""
+        gain_step, drag_step = ADAPT_GAIN_SLEW * dt, ADAPT_DRAG_SLEW * dt
+        if gain is not None:
+            cur = self.gain[0]
+            new_gain = cur + max(-gain_step, min(gain_step, gain - cur))
+            self.gain = (new_gain, new_gain, self.gain[2])
+        if vertical is not None and ADOPT_VERTICAL:
+            gz, cz = self.gain[2], self.drag[2]
+            gz += max(-gain_step, min(gain_step, vertical[0] - gz))
+            cz += max(-drag_step, min(drag_step, vertical[1] - cz))
+            self.gain = (self.gain[0], self.gain[1], gz)
+            self.drag = (self.drag[0], self.drag[1], cz)
         step = ADAPT_SLEW * dt
         lag, delay = target
         cur_lag, cur_delay = self.lag[0], self.delay_s

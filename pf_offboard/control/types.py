@@ -242,9 +242,10 @@ class Compensation:
     integral_rad_s: float = 1.0  # integral action on speed and transversal offsets (rad/s)
     phase_margin_deg: float = 30.0  # transversal loops, for gains: auto
     tangential_phase_margin_deg: float = 40.0  # the speed loop's, for gains: auto
-    # It only ever shortens the dead time (docs/controller.md, Identifying the inner loop in flight);
-    # both engines (the scalar follower, sim/batch) identify alike
-    identify_online: bool = True  # without a vehicle: section, identify the inner loop's dead time and drag in flight
+    # A shorter dead time readily, a longer one with its gain and drag once settled and decisive
+    # (docs/controller.md, Identifying the inner loop in flight); both engines (the scalar
+    # follower, sim/batch) identify alike
+    identify_online: bool = True  # without a vehicle: section, identify the inner loop's dead time, gain and drag in flight
 
     def __post_init__(self) -> None:
         for name, lo, hi in (("observer_rad_s", 0.0, 50.0), ("integral_rad_s", 0.0, 10.0),

@@ -51,11 +51,18 @@ from pf_offboard.logs.steplog import StepRecord
 
 IDENTIFIED_PREFIX = "identified: "
 _IDENTIFIED_KEYS = ("lag_s", "delay_s", "drag_1_s")
+_FITTED_KEYS = ("gain_xy", "gain_z", "drag_z_1_s")  # a joint model's, when not the defaults
 
 
-def identified_event(lag_s: float, delay_s: float, drag_1_s: float) -> str:
-    """The step log's event for an adopted inner-loop model (floats as ``repr``: read back exactly)."""
-    return IDENTIFIED_PREFIX + " ".join(f"{k}={float(v)!r}" for k, v in zip(_IDENTIFIED_KEYS, (lag_s, delay_s, drag_1_s)))
+def identified_event(lag_s: float, delay_s: float, drag_1_s: float, gain_xy: float = 1.0, gain_z: float = 1.0,
+                     drag_z_1_s: float = 0.0) -> str:  # fmt: skip
+    """The step log's event for an adopted inner-loop model (floats as ``repr``: read back exactly;
+    the gains and vertical drag only when fitted, not 1 and 0)."""
+    text = IDENTIFIED_PREFIX + " ".join(f"{k}={float(v)!r}" for k, v in zip(_IDENTIFIED_KEYS, (lag_s, delay_s, drag_1_s)))
+    for key, value, default in (("gain_xy", gain_xy, 1.0), ("gain_z", gain_z, 1.0), ("drag_z_1_s", drag_z_1_s, 0.0)):
+        if value != default:
+            text += f" {key}={float(value)!r}"
+    return text
 
 
 def parse_identified(event: str) -> dict[str, float] | None:
@@ -64,7 +71,11 @@ def parse_identified(event: str) -> dict[str, float] | None:
         return None
     try:
         values = dict(item.split("=", 1) for item in event[len(IDENTIFIED_PREFIX):].split())
-        return {k: float(values[k]) for k in _IDENTIFIED_KEYS}
+        model = {k: float(values[k]) for k in _IDENTIFIED_KEYS}
+        for key in _FITTED_KEYS:
+            if key in values:
+                model[key] = float(values[key])
+        return model
     except (KeyError, ValueError):
         return None
 
@@ -150,7 +161,10 @@ class FlightSummary:
         if m is None:
             out.append("identified model    none adopted (the configured or typical inner-loop model was flown)")
         else:
-            out.append(f"identified model    lag {m['lag_s']:.3f} s, dead time {m['delay_s']:.3f} s, drag {m['drag_1_s']:.3f} 1/s "
+            gain = f", gain {m['gain_xy']:.3f}" if "gain_xy" in m else ""
+            if "gain_z" in m or "drag_z_1_s" in m:
+                gain += f"; vertical gain {m.get('gain_z', 1.0):.3f}, drag {m.get('drag_z_1_s', 0.0):.3f} 1/s"
+            out.append(f"identified model    lag {m['lag_s']:.3f} s, dead time {m['delay_s']:.3f} s, drag {m['drag_1_s']:.3f} 1/s{gain} "
                        f"(adopted at t={m['adopted_at_s']:.3f} s)")  # fmt: skip
         for t, a, b in self.mode_changes:
             out.append(f"mode change         t={t:.3f} s: {a or '-'} -> {b}")

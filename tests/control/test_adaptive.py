@@ -12,8 +12,9 @@ from pf_offboard.control import VehicleModel
 from pf_offboard.control.compensator import InnerLoopCompensator
 
 
-def _fly(delay_s: float, lag_s: float, drag_1_s: float, seconds: float = 8.0, longer_lags_s: float | None = None) -> InnerLoopCompensator:
-    """Circle-like setpoints through a first-order lag + dead time + linear drag plant (100 Hz).
+def _fly(delay_s: float, lag_s: float, drag_1_s: float, seconds: float = 8.0, longer_lags_s: float | None = None,
+         gain: float = 1.0, amplitude_m_s2: float = 2.0) -> InnerLoopCompensator:  # fmt: skip
+    """Circle-like setpoints through a first-order lag + dead time + gain + linear drag plant (100 Hz).
     ``longer_lags_s``: :meth:`InnerLoopCompensator.identify_lags_up_to` with it first."""
     comp = InnerLoopCompensator(VehicleModel.typical(), adapt=True)
     if longer_lags_s is not None:
@@ -25,13 +26,14 @@ def _fly(delay_s: float, lag_s: float, drag_1_s: float, seconds: float = 8.0, lo
     for _ in range(int(seconds / dt)):
         comp.predict(t, (0.0, 0.0, 2.0), (v[0], v[1], 0.0))
         w = 1.5
-        sp = (-2.0 * math.sin(w * t), 2.0 * math.cos(w * t) * math.cos(0.7 * t), 0.0)
+        amp = amplitude_m_s2
+        sp = (-amp * math.sin(w * t), amp * math.cos(w * t) * math.cos(0.7 * t), 0.0)
         comp.record(t, sp)
         for k in range(sub):  # the plant: setpoints act after delay_s through the lag
             tau = t + k * dt / sub
             acting = comp.outgoing(tau - delay_s) if tau - delay_s >= 0.0 else (0.0, 0.0, 0.0)
             for i in (0, 1):
-                a_f[i] += (acting[i] - a_f[i]) * (dt / sub) / lag_s
+                a_f[i] += (gain * acting[i] - a_f[i]) * (dt / sub) / lag_s
                 v[i] += (a_f[i] - drag_1_s * v[i]) * dt / sub
         t += dt
     return comp
@@ -47,12 +49,61 @@ def test_the_bank_finds_the_dead_time_and_the_drag(delay_s, drag_1_s):
     assert comp.delay_s == delay and comp.horizon_s == delay  # the model moved there
 
 
-@pytest.mark.parametrize("delay_s", [0.1, 0.2])
-def test_the_typical_model_is_kept_when_it_fits_or_the_loop_is_slower(delay_s):
-    """A slower inner loop than the guess needs lower gains, not a longer prediction: the dead
-    time is only ever shortened."""
-    comp = _fly(delay_s, 0.1, 0.0)
-    assert comp.delay_s == 0.1 and comp.drag == (0.0, 0.0, 0.0)
+@pytest.mark.parametrize("drag_1_s,gain", [(0.0, 1.0), (0.8, 0.85)])
+def test_the_typical_model_is_kept_when_its_dead_time_fits(drag_1_s, gain):
+    """The typical model's response, with or without PX4 SIH's gain and drag: nothing longer is
+    adopted (the initial candidate, with its own fitted gain and drag, explains it)."""
+    comp = _fly(0.1, 0.1, drag_1_s, seconds=12.0, gain=gain)
+    assert comp.identified is None and comp.delay_s == 0.1 and comp.gain == (1.0, 1.0, 1.0)
+    ident = comp.identifier
+    assert ident is not None
+    _, _, g, c = ident.fit(ident.joint_initial)  # its fit is the plant's
+    assert abs(g - gain) <= 0.01 and abs(c - drag_1_s) <= 0.02
+
+
+@pytest.mark.parametrize("delay_s,drag_1_s,gain", [(0.2, 0.75, 0.85), (0.16, 1.0, 0.95), (0.13, 0.742, 0.885)])
+def test_a_slower_loop_is_adopted_with_its_gain_and_drag(delay_s, drag_1_s, gain):
+    """A longer dead time than the guess (PX4 SIH answers after ~0.24 s, with gain 0.885 and drag
+    0.742 1/s) is fitted with its gain and drag by least squares and adopted together once settled
+    (after 6 s of data at the earliest; the shortest decisive dead time first, 0.2 s by way of a
+    shorter one); the compensator slews to all three."""
+    early = _fly(delay_s, 0.1, drag_1_s, seconds=5.5, gain=gain)
+    assert early.identified is None  # not before LONGER_MIN_DATA_S
+    comp = _fly(delay_s, 0.1, drag_1_s, seconds=12.0, gain=gain)
+    m = comp.identified
+    assert m is not None and m.lag_s == 0.1 and m.delay_s == delay_s and 6.0 <= m.adopted_at_s <= 11.0
+    assert abs(m.gain_xy - gain) <= 0.01 and abs(m.drag_1_s - drag_1_s) <= 0.02
+    assert comp.delay_s == comp.horizon_s == delay_s and comp.hold_s == (0.0, 0.0, 0.0)
+    assert abs(comp.gain[0] - gain) <= 0.01 and abs(comp.drag[0] - drag_1_s) <= 0.02
+    # the vertical axis flies the same gain and drag (a common thrust scale, isotropic drag), its own lag
+    assert abs(comp.gain[2] - gain) <= 0.01 and abs(comp.drag[2] - drag_1_s) <= 0.02 and comp.lag[2] == 0.05
+    assert (m.gain_z, m.drag_z_1_s) == (m.gain_xy, m.drag_1_s)
+
+
+def test_a_nearby_dead_time_is_adopted_at_the_nearest_candidate():
+    """PX4 SIH's 0.136 s lies between the candidates: the nearest (0.13 s) is adopted, its gain and
+    drag trading off the rest."""
+    comp = _fly(0.136, 0.104, 0.742, seconds=12.0, gain=0.885)
+    m = comp.identified
+    assert m is not None and m.delay_s == 0.13
+    assert abs(m.gain_xy - 0.885) <= 0.03 and abs(m.drag_1_s - 0.742) <= 0.1
+
+
+def test_a_slower_loop_is_not_adopted_without_excitation():
+    """Setpoints of 0.3 m/s^2 (below MIN_EXCITATION_M_S2 RMS): the fit is not trusted."""
+    comp = _fly(0.2, 0.1, 0.75, seconds=12.0, gain=0.85, amplitude_m_s2=0.3)
+    assert comp.identified is None and comp.delay_s == 0.1
+
+
+def test_the_joint_fit_is_least_squares_exact():
+    """The fit of a known system (the plant's own candidate) has no residual; the others do, more
+    the further their dead time is from the plant's."""
+    comp = _fly(0.16, 0.1, 1.0, seconds=12.0, gain=0.95)
+    ident = comp.identifier
+    assert ident is not None
+    scores = {ident.candidate(k)[1]: ident.joint_score(k) for k in ident.joint}
+    assert scores[0.16] <= 0.01 * min(v for d, v in scores.items() if d != 0.16)  # the discretisation's only
+    assert scores[0.13] < scores[0.1] and scores[0.2] < scores[0.25] < scores[0.3]
 
 
 def test_a_longer_lag_is_adopted_only_when_asked_for():

@@ -173,8 +173,8 @@ def test_defaults_meet_the_targets_with_rates_output(wind_m_s, seconds, window_s
 def test_the_law_alone_misses_them_with_rates_output():
     """Why the reference: the law alone (its tilt follows the demand as a 0.25 s first-order lag
     plus rotorpy's 33 ms rate loop, the compensator leads and inverts the modelled 0.1 s, and the
-    identifier may only shorten the dead time: nothing adopted). Measured 1.37 cm, 2.1 cm/s (the
-    measure can fail)."""
+    identifier adopts no shorter dead time; the joint bank reads it late, 9-11 s, as a 0.13 s dead
+    time with gain 0.93). Measured 1.36 cm, 2.3 cm/s (the measure can fail)."""
     follower = None
 
     def make(path: Path) -> PathFollower:
@@ -183,7 +183,8 @@ def test_the_law_alone_misses_them_with_rates_output():
         return follower
 
     ct, rms, mean = _run(make, "rates", 0.0, "the law alone")
-    assert follower.compensator.identified is None  # type: ignore[union-attr]
+    model = follower.compensator.identified  # type: ignore[union-attr]
+    assert model is None or (model.delay_s > 0.1 and model.adopted_at_s >= 6.0)  # never a shorter dead time
     assert ct > 0.01
 
 

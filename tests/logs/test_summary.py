@@ -139,6 +139,8 @@ def test_the_last_identified_model_is_the_summarys() -> None:
     first = identified_event(0.1, 0.04, 0.25)
     assert parse_identified(first) == {"lag_s": 0.1, "delay_s": 0.04, "drag_1_s": 0.25}
     assert parse_identified("identified: lag_s=x") is None and parse_identified("activated") is None
+    joint = identified_event(0.1, 0.13, 0.85, gain_xy=0.9, gain_z=0.8, drag_z_1_s=0.7)  # a joint model's fit
+    assert parse_identified(joint) == {"lag_s": 0.1, "delay_s": 0.13, "drag_1_s": 0.85, "gain_xy": 0.9, "gain_z": 0.8, "drag_z_1_s": 0.7}
     recs = [record(0.02 * k, 0.01, -1.5) for k in range(400)]
     plain = summarize(recs)
     assert plain.identified_model is None and plain.to_dict()["identified_model"] is None

@@ -45,6 +45,18 @@ class BatchIdentifier:
         """The active candidate's drag per flight (NaN where none is adopted: the scalar's None)."""
         return np.array([math.nan if (d := f.drag_1_s) is None else d for f in self.flights])
 
+    @property
+    def gain_xy(self) -> Arr:
+        """The active candidate's horizontal gain per flight (NaN where none is adopted)."""
+        return np.array([math.nan if (g := f.gain_xy) is None else g for f in self.flights])
+
+    @property
+    def vertical(self) -> tuple[Arr, Arr]:
+        """The active joint candidate's vertical (gain, drag 1/s) per flight (NaN where none is)."""
+        zs = [f.vertical for f in self.flights]
+        return (np.array([math.nan if z is None else z[0] for z in zs]),
+                np.array([math.nan if z is None else z[1] for z in zs]))  # fmt: skip
+
     def update(self, time_s: float, velocity: V, pieces: Callable[[float, float, float], list[tuple[float, V | None]]]) -> tuple[NDArray[np.bool_], Arr, Arr] | None:  # fmt: skip
         """:meth:`ResponseIdentifier.update` per flight: (adopted now per flight, its lag, its
         delay; NaN where none was adopted), or None when no flight adopted at this step."""

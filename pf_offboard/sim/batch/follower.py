@@ -17,7 +17,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard.control import follower as F
-from pf_offboard.control.compensator import ADAPT_DRAG_SLEW, ADAPT_SLEW, MAX_GAP_S, OFFSET_INTEGRAL_BAND_M
+from pf_offboard.control.compensator import (
+    ADAPT_DRAG_SLEW,
+    ADAPT_GAIN_SLEW,
+    ADAPT_SLEW,
+    ADOPT_VERTICAL,
+    MAX_GAP_S,
+    OFFSET_INTEGRAL_BAND_M,
+)
 from pf_offboard.control.types import GRAVITY_M_S2
 from pf_offboard.sim.batch.adaptive import BatchIdentifier
 from pf_offboard.sim.batch.geometry import BatchPath, atan2, power
@@ -192,11 +199,12 @@ class _Compensator:
             full = lambda x: np.full(n, float(x))  # noqa: E731
             self.horizon_s = full(c.horizon_s)
             self.lag = (full(c.lag[0]), full(c.lag[1]), c.lag[2])
-            self.drag = (full(c.drag[0]), full(c.drag[1]), c.drag[2])
+            self.drag = (full(c.drag[0]), full(c.drag[1]), full(c.drag[2]))
+            self.gain = (full(c.gain[0]), full(c.gain[1]), full(c.gain[2]))
             target = c._target if c._target is not None else (math.nan, math.nan)
             self._target = (full(target[0]), full(target[1]))
             m = c.identified
-            known = (math.nan,) * 4 if m is None else (m.lag_s, m.delay_s, m.drag_1_s, m.adopted_at_s)
+            known = (math.nan,) * 7 if m is None else (m.lag_s, m.delay_s, m.drag_1_s, m.adopted_at_s, m.gain_xy, m.gain_z, m.drag_z_1_s)
             self._identified = tuple(full(x) for x in known)  # what was adopted last, per flight
         self.reset()
 
@@ -349,14 +357,32 @@ class _Compensator:
             adopt, lag, delay = found
             self._target = (np.where(adopt, lag, self._target[0]), np.where(adopt, delay, self._target[1]))
             if adopt.any():
-                new = (lag, delay, self.identifier.drag_1_s, np.full(self.n, time_s))
+                gain = self.identifier.gain_xy
+                gz, cz = self.identifier.vertical
+                new = (lag, delay, self.identifier.drag_1_s, np.full(self.n, time_s), np.where(np.isnan(gain), 1.0, gain),
+                       np.where(np.isnan(gz), self.gain[2], gz), np.where(np.isnan(cz), self.drag[2], cz))  # fmt: skip
                 self._identified = tuple(np.where(adopt, x, old) for x, old in zip(new, self._identified))
         rows = ~np.isnan(self._target[0])
         if rows.any():
-            self._move_to_target(time_s - t_prev, rows, self._target, self.identifier.drag_1_s)
+            ident = self.identifier
+            self._move_to_target(time_s - t_prev, rows, self._target, ident.drag_1_s, ident.gain_xy, ident.vertical)
 
-    def _move_to_target(self, dt: float, rows: Mask, target: tuple[Arr, Arr], drag: Arr) -> None:
-        """``InnerLoopCompensator._move_to_target`` for the flights ``rows`` (drag NaN: none)."""
+    def _move_to_target(self, dt: float, rows: Mask, target: tuple[Arr, Arr], drag: Arr, gain: Arr,
+                        vertical: tuple[Arr, Arr]) -> None:  # fmt: skip
+        """``InnerLoopCompensator._move_to_target`` for the flights ``rows`` (drag, gain, vertical
+        NaN: none)."""
+        gain_step, drag_step = ADAPT_GAIN_SLEW * dt, ADAPT_DRAG_SLEW * dt
+        has_gain = rows & ~np.isnan(gain)
+        cur_gain = self.gain[0]
+        new_gain = np.where(has_gain, cur_gain + np.maximum(-gain_step, np.minimum(gain_step, gain - cur_gain)), cur_gain)
+        self.gain = (new_gain, new_gain, self.gain[2])
+        gz_t, cz_t = vertical
+        has_z = rows & ~np.isnan(gz_t) if ADOPT_VERTICAL else np.zeros(self.n, dtype=bool)
+        gz, cz = self.gain[2], self.drag[2]
+        gz = np.where(has_z, gz + np.maximum(-gain_step, np.minimum(gain_step, gz_t - gz)), gz)
+        cz = np.where(has_z, cz + np.maximum(-drag_step, np.minimum(drag_step, cz_t - cz)), cz)
+        self.gain = (self.gain[0], self.gain[1], gz)
+        self.drag = (self.drag[0], self.drag[1], cz)
         step = ADAPT_SLEW * dt
         lag, delay = target
         cur_lag, cur_delay = self.lag[0], self.horizon_s
@@ -374,7 +400,7 @@ class _Compensator:
         """``InnerLoopCompensator.identified`` per flight (NaN where nothing was adopted)."""
         if self.identifier is None:
             return None
-        return dict(zip(("lag_s", "delay_s", "drag_1_s", "adopted_at_s"), self._identified))
+        return dict(zip(("lag_s", "delay_s", "drag_1_s", "adopted_at_s", "gain_xy", "gain_z", "drag_z_1_s"), self._identified))
 
     def _extrapolate(self, time_s: float, position: V, velocity: V) -> tuple[V, V]:
         if np.all(self.horizon_s <= 0.0):

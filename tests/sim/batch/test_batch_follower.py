@@ -103,5 +103,5 @@ def test_identifying_followers_equal_the_scalar_ones_adoption_by_adoption() -> N
         if m is None:
             assert np.isnan(found["adopted_at_s"][i])
         else:
-            for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s"):
+            for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s", "gain_xy"):
                 assert abs(getattr(m, key) - float(found[key][i])) <= 1e-9, (i, key)
