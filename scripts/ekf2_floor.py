@@ -73,6 +73,8 @@ def analyse(run: Path, settle_s: float = 8.0) -> dict[str, object]:
     tang = np.array([tangent(float(x)) for x in lam])
     speed = measures.position_speed_along_path(t, p, tang) - np.array([r.speed_ref_m_s for r in recs])
     closest = np.array([path.eval_floats(path.wrap(float(x)))[0:3] for x in lam], dtype=float)
+    if not act.any():
+        raise ValueError("never activated")
     t_act = t[act][0]
     w = act & (t >= t_act + settle_s)
     if not path.closed:  # as the campaign: up to the open path's end or where the reference slows for it
@@ -81,7 +83,7 @@ def analyse(run: Path, settle_s: float = 8.0) -> dict[str, object]:
         end = act & ((lam >= path.lam_max - 1e-6) | ((t > t_act + settle_s) & (ref < 0.99 * nominal)))
         if end.any():
             w &= t < t[end][0]
-    out: dict[str, object] = {"name": run.name, "ct": bands(t[w], (p - closest)[w]), "speed": bands(t[w], speed[w])}
+    out: dict[str, object] = {"name": f"{run.parent.name}/{run.name}", "ct": bands(t[w], (p - closest)[w]), "speed": bands(t[w], speed[w])}
     out["sat"] = float(np.mean([r.sat_tangential or r.sat_transversal or r.sat_tilt or r.sat_thrust for r, k in zip(recs, w) if k]))
     if path.closed:
         out["ct_lap"] = lap_locked(lam[w], np.array([r.cross_track_m for r, k in zip(recs, w) if k]), path.lam_max)

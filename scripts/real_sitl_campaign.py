@@ -177,7 +177,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         config.write_text(yaml.safe_dump(data, sort_keys=False))
     log_dir = work / "log"
     sitl = start_sitl(spec["autopilot"], work / "sitl", spec.get("params"), spec.get("px4_env"))
-    result: dict[str, Any] = {"spec": spec}
+    result: dict[str, Any] = {"spec": spec, "load_1min": [os.getloadavg()[0]]}  # a loaded machine perturbs real-time SITLs
     t0 = time.monotonic()
     launch_log = (work / "launch.log").open("w")
     try:
@@ -209,6 +209,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         stop_sitl(sitl)
         launch_log.close()
     result["wall_s"] = time.monotonic() - t0
+    result["load_1min"].append(os.getloadavg()[0])
     if (log_dir / "flight.csv").exists():
         from pf_offboard.logs.truth import find_ulog
 
@@ -446,6 +447,8 @@ def row(result: dict[str, Any]) -> str:
             f"ct RMS {cm(s.get('cross_track_rms_m'))} max {cm(s.get('cross_track_max_m'))} cm | speed err RMS {cm(s.get('speed_error_rms_m_s'))} "
             f"mean {cm(s.get('speed_error_mean_m_s'))} cm/s (est {cm(s.get('estimator_speed_error_rms_m_s'))}) | mean speed "
             f"{s.get('speed_mean_m_s') or math.nan:.2f} m/s | conv {tr.get('convergence_time_s')}")  # fmt: skip
+    if result.get("load_1min"):
+        line += f" | load {'-'.join(f'{x:.1f}' for x in result['load_1min'])}"
     if result.get("past_the_end"):
         pe = result["past_the_end"]
         line += f"\n{'':38s}(window ends at the open path's end; after it: overshoot {cm(pe['overshoot_m'])} cm, cross-track max {cm(pe['cross_track_max_m'])} cm over {pe['duration_s']:.1f} s)"
