@@ -43,8 +43,10 @@ HOME = "-35.363261,149.165230,584,353"
 
 
 # ------------------------------------------------------------------------------------ SITL control
-def start_sitl(autopilot: str, workdir: Path, params: dict[str, float] | None = None) -> subprocess.Popen[bytes]:
-    """A fresh SITL in ``workdir`` (its own session; stop with :func:`stop_sitl`)."""
+def start_sitl(autopilot: str, workdir: Path, params: dict[str, float] | None = None,
+               px4_env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
+    """A fresh SITL in ``workdir`` (its own session; stop with :func:`stop_sitl`); ``px4_env``: extra
+    environment for PX4 (e.g. PX4_SIH_NOISE_SCALE, read by a SIH patched to scale its sensor noise)."""
     workdir.mkdir(parents=True, exist_ok=True)
     log = (workdir / f"{autopilot}.log").open("wb")
     env = dict(os.environ)
@@ -53,6 +55,7 @@ def start_sitl(autopilot: str, workdir: Path, params: dict[str, float] | None = 
         rootfs.mkdir(exist_ok=True)
         env.update({"PX4_SIMULATOR": "sihsim", "PX4_SIM_MODEL": "sihsim_quadx", "HEADLESS": "1", "PX4_SIM_SPEED_FACTOR": "1"})
         env.update({f"PX4_PARAM_{k}": str(v) for k, v in (params or {}).items()})
+        env.update(px4_env or {})
         cmd = [str(PX4_BUILD / "bin" / "px4"), "-d", "-w", str(rootfs), str(PX4_BUILD / "etc")]
     else:
         parm = ARDUCOPTER.parents[3] / "Tools" / "autotest" / "default_params" / "copter.parm"
@@ -173,8 +176,8 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         config = work / f"{config.stem}-flown.yaml"
         config.write_text(yaml.safe_dump(data, sort_keys=False))
     log_dir = work / "log"
-    sitl = start_sitl(spec["autopilot"], work / "sitl", spec.get("params"))
-    result: dict[str, Any] = {"spec": spec}
+    sitl = start_sitl(spec["autopilot"], work / "sitl", spec.get("params"), spec.get("px4_env"))
+    result: dict[str, Any] = {"spec": spec, "load_1min": [os.getloadavg()[0]]}  # a loaded machine perturbs real-time SITLs
     t0 = time.monotonic()
     launch_log = (work / "launch.log").open("w")
     try:
@@ -206,6 +209,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         stop_sitl(sitl)
         launch_log.close()
     result["wall_s"] = time.monotonic() - t0
+    result["load_1min"].append(os.getloadavg()[0])
     if (log_dir / "flight.csv").exists():
         from pf_offboard.logs.truth import find_ulog
 
@@ -443,6 +447,8 @@ def row(result: dict[str, Any]) -> str:
             f"ct RMS {cm(s.get('cross_track_rms_m'))} max {cm(s.get('cross_track_max_m'))} cm | speed err RMS {cm(s.get('speed_error_rms_m_s'))} "
             f"mean {cm(s.get('speed_error_mean_m_s'))} cm/s (est {cm(s.get('estimator_speed_error_rms_m_s'))}) | mean speed "
             f"{s.get('speed_mean_m_s') or math.nan:.2f} m/s | conv {tr.get('convergence_time_s')}")  # fmt: skip
+    if result.get("load_1min"):
+        line += f" | load {'-'.join(f'{x:.1f}' for x in result['load_1min'])}"
     if result.get("past_the_end"):
         pe = result["past_the_end"]
         line += f"\n{'':38s}(window ends at the open path's end; after it: overshoot {cm(pe['overshoot_m'])} cm, cross-track max {cm(pe['cross_track_max_m'])} cm over {pe['duration_s']:.1f} s)"
@@ -511,6 +517,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--app-python", help="python that runs the app (default: this one)")
     ap.add_argument("--app-path", help="PYTHONPATH for the app (another checkout)")
     ap.add_argument("--px4-param", action="append", default=[], metavar="NAME=VALUE", help="a PX4 parameter for every PX4 flight")
+    ap.add_argument("--px4-env", action="append", default=[], metavar="NAME=VALUE",
+                    help="an environment variable for every PX4 SITL (e.g. PX4_SIH_NOISE_SCALE=0 on a SIH built to read it)")
     ap.add_argument("--tag", default="", help="appended to each flight's directory name")
     ap.add_argument("--starts", action="store_true", help="the thrown starts (ArduCopter) and fast off-path starts (PX4) instead")
     ap.add_argument("--table", type=Path, metavar="DIR", help="a Markdown table of a campaign's flights (ranges over repeats)")
@@ -579,7 +587,8 @@ def main(argv: list[str] | None = None) -> int:
                                       "max_speed_m_s": None if speed == 1.5 else speed, "laps": 3 if closed else 1,
                                       "workdir": str((args.out / tag).resolve()), "app_python": args.app_python,
                                       "app_path": args.app_path,
-                                      "params": dict(kv.split("=", 1) for kv in args.px4_param) if autopilot == "px4" else None})  # fmt: skip
+                                      "params": dict(kv.split("=", 1) for kv in args.px4_param) if autopilot == "px4" else None,
+                                      "px4_env": dict(kv.split("=", 1) for kv in args.px4_env) if autopilot == "px4" else None})  # fmt: skip
     for spec in specs:
         queues.setdefault(spec["autopilot"], queue.Queue()).put(spec)
     lock = threading.Lock()

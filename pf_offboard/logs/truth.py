@@ -227,26 +227,31 @@ def judge_truth(records: Any, truth_time_s: NDArray[np.float64], truth_ned_m: ND
     rms = np.sqrt((err**2).mean(axis=0))
     p2p = err.max(axis=0) - err.min(axis=0)
     # the truth moved by the offset, as a flight: projected, cross-track, speed from its derivative.
-    # Each truth point is projected starting from where its estimate projects (found afresh, the
-    # estimate being near the path): on a helix, a warm start carried from sample to sample could
-    # lock onto the neighbouring turn.
+    # Each truth point is projected on the branch its estimate was projected on in flight (the step
+    # log's lam, a warm start): a search carried from truth sample to truth sample could lock onto a
+    # helix's neighbouring turn, and a fresh global search near a figure-eight's crossing can land
+    # on the other branch, whose tangent turns the speed along the path into nonsense.
     moved = tru_at + offset
     lam = np.full(len(t), math.nan)
     ct = np.full(len(t), math.nan)
     ct_raw = []
     proj = Projector(path, jump_m=5.0)
 
-    def near(estimate_ned: NDArray[np.float64], point_ned: NDArray[np.float64]) -> tuple[float, float]:
+    def near(i: int, point_ned: NDArray[np.float64]) -> tuple[float, float]:
         proj.reset()
-        proj.update(np.asarray(frames.ned_to_enu(estimate_ned), dtype=float))
+        estimate = np.asarray(frames.ned_to_enu(est_ned[i]), dtype=float)
         enu = np.asarray(frames.ned_to_enu(point_ned), dtype=float)
+        if math.isfinite(recs[i].lam):
+            proj.seed(recs[i].lam, enu, estimate)
+        else:  # no projection logged (before activation): found afresh from the estimate
+            proj.update(estimate)
         lam_i = proj.update(enu)
         return lam_i, float(np.linalg.norm(enu - np.asarray(path.eval_floats(lam_i)[0:3])))
 
     for i in np.flatnonzero(inside):
-        lam[i], ct[i] = near(est_ned[i], moved[i])
+        lam[i], ct[i] = near(i, moved[i])
         if sel[i]:
-            ct_raw.append(near(est_ned[i], tru_at[i])[1])
+            ct_raw.append(near(i, tru_at[i])[1])
     moved_enu = np.array([frames.ned_to_enu(p) for p in moved], dtype=float)
     window_active = inside & np.array([r.active for r in recs])
     track = measures.tracking(t[inside], moved_enu[inside], lam[inside], ct[inside], np.full(int(inside.sum()), math.nan),

@@ -78,3 +78,25 @@ def test_a_truthless_or_broken_ulog_is_refused(tmp_path: Path) -> None:
         read_ulog_truth(junk)
     golden = Path(__file__).resolve().parents[1] / "data" / "paper_hover_px4.tlog.gz"
     assert main(["replay", str(golden), "--truth", str(junk)]) == 2
+
+
+def test_the_truth_stays_on_the_estimates_branch_at_a_crossing(tmp_path: Path) -> None:
+    """On a figure-eight a fresh closest-point search near the crossing can land on the other
+    branch (its tangent crosses this one's): a truth equal to the estimate (offset aside) must give
+    the estimate's own figures, speed error included."""
+    config = Path(__file__).resolve().parents[1] / "real_sitl" / "configs" / "figure8-tilted.yaml"
+    out = tmp_path / "flight"
+    assert main(["sim", "--config", str(config), "--duration", "24", "--out", str(out)]) == 0
+    recs = read_steplog(out / "flight.csv")
+    t = np.array([r.time_s for r in recs])
+    truth = np.array([frames.enu_to_ned(r.position_enu_m) for r in recs], dtype=float) - OFFSET_NED_M
+    ulg = write_ulog(tmp_path / "sih.ulg", TOPIC, ("x", "y", "z"), (t * 1e6).round().astype(int), truth)
+    t_s, ned = read_ulog_truth(ulg)
+    path = load_config(config).path.spline()
+    r = judge_truth(recs, t_s, ned, path)
+    from pf_offboard.logs import measures
+
+    est = measures.tracking_of_records(recs, measures.path_tangent(path)).settled
+    assert r.truth is not None and est is not None and est.speed_error_rms_m_s is not None
+    assert r.truth.speed_error_rms_m_s == pytest.approx(est.speed_error_rms_m_s, abs=2e-3)
+    assert r.truth.cross_track_rms_m == pytest.approx(est.cross_track_rms_m, abs=1e-3)
