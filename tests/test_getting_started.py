@@ -4,8 +4,12 @@ its own network namespace; the test skips when the ports are taken).
 
 - `# file: NAME` as the first line of a ```yaml block writes that block to NAME first;
 - a command whose comment says "not run in the tests" needs hardware or a real SITL build;
-- a `sitl-mock` line is "terminal 1": started in the background (with `--speed 4`, the one
-  change, so the suite stays quick) and stopped before the next one starts;
+- a `sitl-mock` line is "terminal 1": started in the background and stopped before the next one
+  starts, with one change so the suite stays quick: the PX4 profile in lockstep (`--lockstep
+  --lockstep-dt 0.02`, one step per setpoint of the configs' 50 Hz, as `pf-offboard demo` runs
+  it: as fast as the host allows, and a loaded host cannot starve the flight); the ArduPilot
+  profile at `--speed 4` (it takes off on its own while the app sends nothing, which a lockstep
+  clock cannot advance);
 - each command must exit 0; a flight's summary.json must report a cross-track RMS ≤ 5 cm.
 """
 
@@ -99,7 +103,8 @@ def test_every_command_of_the_guide_runs(tmp_path, monkeypatch, capsys) -> None:
                 if mock is not None:
                     mock.terminate()
                     mock.wait(10)
-                mock = subprocess.Popen([str(bin_dir / "sitl-mock"), *argv[1:], "--speed", "4"], cwd=tmp_path, env=env,
+                clock = ["--speed", "4"] if "ardupilot" in argv else ["--lockstep", "--lockstep-dt", "0.02"]
+                mock = subprocess.Popen([str(bin_dir / "sitl-mock"), *argv[1:], *clock], cwd=tmp_path, env=env,
                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
                 _wait_for_mock(mock)
                 continue
