@@ -189,7 +189,15 @@ def test_replay_recomputes_every_setpoint_that_flew(tmp_path, output: str) -> No
 
 
 def test_stale_state_stops_following_and_exits_3(tmp_path) -> None:
+    """The telemetry stops for good at 3 s: exit 3 "stale", no step after it. The hold request can
+    never be confirmed (nothing comes back), so it is retried for safety.safe_mode_timeout_s: 1 s
+    here instead of the default 10 s of waiting for nothing."""
+    import yaml
+
     config = write_config(tmp_path)
+    data = yaml.safe_load(config.read_text())
+    data["safety"] = {**data.get("safety", {}), "safe_mode_timeout_s": 1.0}
+    config.write_text(yaml.safe_dump(data))
     cfg = mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)), faults=FaultConfig(blackout_s=(3.0, 60.0)))
     with spawn(cfg) as mock:
         outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--duration", "30")
