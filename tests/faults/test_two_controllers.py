@@ -44,7 +44,7 @@ class OtherController(Attacker):
     envelope first, which ends the flight too, with exit 5).
 
     Paced in vehicle time, not on a wall-clock thread: it sends from the mock's own loop (its
-    ``on_received`` hook) every ``period_s`` of vehicle time, from ``start_after_s`` of vehicle
+    ``on_received`` hook) every 0.5-1.5 ``period_s`` of vehicle time (seeded), from ``start_after_s`` of vehicle
     time into following on, but not before the app's grace for the echoes of its own setpoints
     (ControllerWatch.own_grace_s, wall clock) is over: a fight that begins inside the grace lasts
     as long as the grace in wall time, i.e. longer in vehicle time the faster the lockstep vehicle
