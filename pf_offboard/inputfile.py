@@ -20,8 +20,8 @@ def _size_text(n: int) -> str:
     return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.1f} MiB" if n >= 2**20 else f"{n / 1024:.0f} kB"
 
 
-def read_bounded(path: str | os.PathLike[str], max_bytes: int) -> bytes:
-    """The whole content of the regular file ``path`` if it is at most ``max_bytes`` long."""
+def _open_checked(path: str | os.PathLike[str], max_bytes: int) -> int:
+    """A descriptor of the regular file ``path`` (opened non-blocking) if it is at most ``max_bytes`` long."""
     try:
         fd = os.open(os.fspath(path), os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:
@@ -35,6 +35,22 @@ def read_bounded(path: str | os.PathLike[str], max_bytes: int) -> bytes:
             raise ValueError(f"{kind}, not a regular file: not read")
         if st.st_size > max_bytes:
             raise ValueError(f"{_size_text(st.st_size)}: larger than the {_size_text(max_bytes)} this input may be")
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def check_bounded(path: str | os.PathLike[str], max_bytes: int) -> None:
+    """Raise as :func:`read_bounded` would, without reading: for a file a library then opens
+    itself (pymavlink, pyulog), so a FIFO, a device or a huge file never reaches it."""
+    os.close(_open_checked(path, max_bytes))
+
+
+def read_bounded(path: str | os.PathLike[str], max_bytes: int) -> bytes:
+    """The whole content of the regular file ``path`` if it is at most ``max_bytes`` long."""
+    fd = _open_checked(path, max_bytes)
+    try:
         chunks: list[bytes] = []
         size = 0
         while size <= max_bytes:

@@ -180,6 +180,7 @@ class MockAutopilot:
         self.rejected_corrupt = 0  # frames refused: CRC / length
         # called with every accepted message and the sender (UDP address or TCP link number)
         self.on_received: Callable[[mavlink.MAVLink_message, Any], None] | None = None
+        self._speed = config.speed  # × real time on its own clock (set_speed changes it while running)
 
     # ------------------------------------------------------------------------------------------
     # Lifecycle
@@ -277,6 +278,16 @@ class MockAutopilot:
     def inject_gust(self, velocity_ned_m_s: tuple[float, float, float], duration_s: float = 1.0) -> None:
         self.autopilot.inject_gust(velocity_ned_m_s, duration_s)
 
+    def set_speed(self, speed: float) -> None:
+        """Run the own clock at ``speed`` × real time from now on (not in lockstep): e.g. a test
+        that has nothing on the link any more lets the vehicle's remaining seconds pass faster.
+        The physics steps are the same whatever the speed; only the wall-clock pacing changes."""
+        if self.config.lockstep:
+            raise ValueError("speed: a lockstep mock advances on setpoints, it has no pace to change")
+        if not (math.isfinite(speed) and speed > 0.0):
+            raise ValueError(f"speed: must be finite and > 0, got {speed}")
+        self._speed = speed
+
     async def wait_for(self, predicate: Callable[[MockAutopilot], bool], timeout_s: float = 10.0) -> bool:
         """Poll ``predicate(self)`` on the event loop until true or ``timeout_s`` wall seconds."""
         loop = asyncio.get_running_loop()
@@ -296,10 +307,13 @@ class MockAutopilot:
         dt = cfg.step_dt_s
         wall0 = loop.time()
         sim0 = self.autopilot.time_s
+        speed = self._speed
         while True:
             now_wall = loop.time()
-            target = sim0 + (now_wall - wall0) * cfg.speed
-            if target - self.autopilot.time_s > 0.25 * cfg.speed:
+            if self._speed != speed:  # set_speed: re-anchor, so the new pace counts from now
+                wall0, sim0, speed = now_wall, self.autopilot.time_s, self._speed
+            target = sim0 + (now_wall - wall0) * speed
+            if target - self.autopilot.time_s > 0.25 * speed:
                 # More than 0.25 s (wall) behind: the host cannot keep up. Run slower than asked
                 # rather than in bursts that would starve the clients.
                 wall0, sim0 = now_wall, self.autopilot.time_s
@@ -315,7 +329,7 @@ class MockAutopilot:
                     break
             self._flush()  # one burst of datagrams per wake-up, packed up to the MTU
             now_wall = loop.time()
-            next_wall = wall0 + (self.autopilot.time_s + dt - sim0) / cfg.speed
+            next_wall = wall0 + (self.autopilot.time_s + dt - sim0) / speed
             await asyncio.sleep(max(0.0, next_wall - now_wall))
 
     async def _keepalive(self) -> None:

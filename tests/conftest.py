@@ -38,7 +38,7 @@ def _hang_guard() -> Iterator[None]:
 # The suite's longest files (a minute or so each on 2 cores, measured with --durations), collected
 # first so that `pytest -n auto --dist loadgroup` starts them first instead of leaving one worker
 # running them alone at the end. Order only: every test still runs.
-LONG_FILES = ("test_getting_started.py", "test_installed.py", "test_cli_fuzz.py", "test_jitter_rates.py", "test_link_faults.py")
+LONG_FILES = ("test_getting_started.py", "test_installed.py", "test_loss_blackout.py", "test_blackout_rates.py", "test_jitter_rates.py")
 # The tests that open the fixed ports of the docs (UDP 14540 / 14580, TCP 5760): one group, so
 # that `--dist loadgroup` runs them one after the other on one worker (they would collide).
 FIXED_PORT_TESTS = ("tests/test_getting_started.py::test_every_command_of_the_guide_runs",

@@ -4,8 +4,12 @@ its own network namespace; the test skips when the ports are taken).
 
 - `# file: NAME` as the first line of a ```yaml block writes that block to NAME first;
 - a command whose comment says "not run in the tests" needs hardware or a real SITL build;
-- a `sitl-mock` line is "terminal 1": started in the background (with `--speed 4`, the one
-  change, so the suite stays quick) and stopped before the next one starts;
+- a `sitl-mock` line is "terminal 1": started in the background and stopped before the next one
+  starts, with one change so the suite stays quick: the PX4 profile in lockstep (`--lockstep
+  --lockstep-dt 0.02`, one step per setpoint of the configs' 50 Hz, as `pf-offboard demo` runs
+  it: as fast as the host allows, and a loaded host cannot starve the flight); the ArduPilot
+  profile at `--speed 4` (it takes off on its own while the app sends nothing, which a lockstep
+  clock cannot advance);
 - each command must exit 0; a flight's summary.json must report a cross-track RMS ≤ 5 cm.
 """
 
@@ -56,14 +60,14 @@ def _free(port: int, kind: int) -> bool:
     return True
 
 
-def _wait_for_mock(mock: subprocess.Popen, timeout_s: float = 10.0) -> None:
-    """Until the mock holds one of its ports (PX4 style UDP 14580, ArduPilot style TCP 5760): a
-    condition, not a fixed wait."""
-    deadline = time.monotonic() + timeout_s
-    while _free(14580, socket.SOCK_DGRAM) and _free(5760, socket.SOCK_STREAM):
-        assert mock.poll() is None, f"sitl-mock exited with {mock.returncode}"
-        assert time.monotonic() < deadline, "sitl-mock did not open its port"
-        time.sleep(0.02)
+def _wait_for_mock(mock: subprocess.Popen) -> None:
+    """Until the mock holds its ports: it prints them (``--print-ports``, one JSON line on stdout)
+    once bound. An event, not a poll; a mock that exits first closes stdout (an empty line)."""
+    assert mock.stdout is not None
+    line = mock.stdout.readline()
+    assert line, f"sitl-mock exited with {mock.wait(10)} before opening its ports"
+    ports = json.loads(line)
+    assert ports.get("udp") == 14580 or ports.get("tcp") == 5760, ports  # the page's ports
 
 
 def _summaries(cwd: Path, before: set[Path]) -> list[Path]:
@@ -84,7 +88,7 @@ def test_every_command_of_the_guide_runs(tmp_path, monkeypatch, capsys) -> None:
     bin_dir = Path(sys.executable).parent
     env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}", "MPLBACKEND": "Agg"}
     shutil.copy(PLAN, tmp_path / "field.plan")
-    mock: subprocess.Popen[bytes] | None = None
+    mock: subprocess.Popen[str] | None = None
     ran: list[str] = []
     try:
         for kind, item in steps(PAGE.read_text()):
@@ -99,8 +103,11 @@ def test_every_command_of_the_guide_runs(tmp_path, monkeypatch, capsys) -> None:
                 if mock is not None:
                     mock.terminate()
                     mock.wait(10)
-                mock = subprocess.Popen([str(bin_dir / "sitl-mock"), *argv[1:], "--speed", "4"], cwd=tmp_path, env=env,
-                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+                    if mock.stdout is not None:
+                        mock.stdout.close()
+                clock = ["--speed", "4"] if "ardupilot" in argv else ["--lockstep", "--lockstep-dt", "0.02"]
+                mock = subprocess.Popen([str(bin_dir / "sitl-mock"), *argv[1:], *clock, "--print-ports"], cwd=tmp_path, env=env,
+                                        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)  # fmt: skip
                 _wait_for_mock(mock)
                 continue
             before = set(tmp_path.rglob("summary.json"))
@@ -125,4 +132,6 @@ def test_every_command_of_the_guide_runs(tmp_path, monkeypatch, capsys) -> None:
         if mock is not None:
             mock.terminate()
             mock.wait(10)
+            if mock.stdout is not None:
+                mock.stdout.close()
     assert any(c.startswith("pf-offboard fly") for c in ran)

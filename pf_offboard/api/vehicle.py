@@ -85,6 +85,7 @@ class FollowSettings:
     experimental_output: bool = False
     ready_timeout_s: float = 120.0
     takeoff_timeout_s: float | None = None
+    command_timeout_s: float = 5.0  # per mode / arm / parameter request, re-sent meanwhile (wall clock)
     log_dir: str | None = None  # None: no logs
     quiet: bool | None = None  # None: as connected
     open_path_end: bool = True  # end at the end of an open path
@@ -98,7 +99,8 @@ class FollowSettings:
         for name, value in (("laps", self.laps), ("duration_s", self.duration_s)):
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise InputError(name, f"must be > 0, got {value}")
-        for name, value in (("ready_timeout_s", self.ready_timeout_s), ("takeoff_timeout_s", self.takeoff_timeout_s)):
+        for name, value in (("ready_timeout_s", self.ready_timeout_s), ("takeoff_timeout_s", self.takeoff_timeout_s),
+                            ("command_timeout_s", self.command_timeout_s)):  # fmt: skip
             if value is not None and not (math.isfinite(value) and 0 < value <= 3600):
                 raise InputError(name, f"must be in (0, 3600] s, got {value}")
         if self.offboard_loss not in (None, "hold", "land"):
@@ -324,6 +326,7 @@ class Vehicle:
         state_source: str = "local_position",
         ready_timeout_s: float = 120.0,
         takeoff_timeout_s: float | None = None,
+        command_timeout_s: float = 5.0,
     ) -> FollowResult:
         """Follow ``path`` (a config file or shipped name, a QGC ``.plan`` or other way-point file,
         a :class:`pf_offboard.Config`, or a :class:`pf_offboard.Path` with ``speed``) until
@@ -348,7 +351,7 @@ class Vehicle:
             launch=launch, height_m=math.nan if height_m is None else float(height_m), laps=laps, duration_s=duration_s,
             output=output, end_action=end_action, state_source=state_source, set_guid_options=set_guid_options,
             experimental_output=experimental_output, ready_timeout_s=ready_timeout_s, takeoff_timeout_s=takeoff_timeout_s,
-            log_dir=None if log_dir is None else os.fspath(log_dir),
+            command_timeout_s=command_timeout_s, log_dir=None if log_dir is None else os.fspath(log_dir),
         ).validated()  # fmt: skip
         return await self._run(config, settings, FlightHooks(config_path=config_path))
 
@@ -566,6 +569,7 @@ class Vehicle:
                 status=not quiet,
                 ready_timeout_s=settings.ready_timeout_s,
                 takeoff_timeout_s=settings.takeoff_timeout_s,
+                command_timeout_s=settings.command_timeout_s,
                 follow=not takeoff_only,
                 offboard_ours=self._offboard_ours,
             )

@@ -65,6 +65,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "measured to oscillate by metres); experimental")  # fmt: skip
     parser.add_argument("--ready-timeout", type=float, default=120.0, metavar="S",
                         help="--takeoff/--airborne: wait up to S seconds for the position estimate and arming checks (default 120)")  # fmt: skip
+    parser.add_argument("--command-timeout", type=float, default=5.0, metavar="S",
+                        help="give up on a mode / arm / parameter request not answered within S seconds, re-sent meanwhile (default 5)")  # fmt: skip
     parser.add_argument("--takeoff-timeout", type=float, metavar="S",
                         help="--takeoff: give up if the take-off altitude is not held within S seconds (default 30 + 5 s per metre)")  # fmt: skip
     parser.add_argument("--offboard-loss", choices=("check", "hold", "land"), default="check",
@@ -111,7 +113,8 @@ def _check_args(args: argparse.Namespace) -> None:
         raise InputError("--duration", f"must be in [{MIN_DURATION_S:g}, 1e6] s, got {args.duration}")
     if not (math.isfinite(args.heartbeat_timeout) and MIN_DURATION_S <= args.heartbeat_timeout <= 3600):
         raise InputError("--heartbeat-timeout", f"must be in [{MIN_DURATION_S:g}, 3600] s, got {args.heartbeat_timeout}")
-    for flag, value in (("--ready-timeout", getattr(args, "ready_timeout", 120.0)), ("--takeoff-timeout", getattr(args, "takeoff_timeout", None))):
+    for flag, value in (("--ready-timeout", getattr(args, "ready_timeout", 120.0)), ("--takeoff-timeout", getattr(args, "takeoff_timeout", None)),
+                        ("--command-timeout", getattr(args, "command_timeout", 5.0))):  # fmt: skip
         if value is not None and not (math.isfinite(value) and MIN_DURATION_S <= value <= 3600):
             raise InputError(flag, f"must be in [{MIN_DURATION_S:g}, 3600] s, got {value}")
     if args.target_system is not None and not 1 <= args.target_system <= 255:
@@ -185,6 +188,7 @@ class FlyRequest:
     experimental_output: bool = False
     ready_timeout_s: float = 120.0
     takeoff_timeout_s: float | None = None
+    command_timeout_s: float = 5.0
     log_dir: str | None = None
     quiet: bool = False
     json: bool = False
@@ -205,7 +209,7 @@ def request_from_args(args: argparse.Namespace, config: Any) -> FlyRequest:
         set_guid_options=bool(getattr(args, "set_guid_options", False)),
         experimental_output=bool(getattr(args, "experimental_output", False)),
         ready_timeout_s=getattr(args, "ready_timeout", 120.0), takeoff_timeout_s=getattr(args, "takeoff_timeout", None),
-        log_dir=args.log_dir, quiet=bool(args.quiet), json=bool(getattr(args, "json", False)),
+        command_timeout_s=getattr(args, "command_timeout", 5.0), log_dir=args.log_dir, quiet=bool(args.quiet), json=bool(getattr(args, "json", False)),
         offboard_loss=None if getattr(args, "offboard_loss", "check") == "check" else args.offboard_loss,
     )  # fmt: skip
 
@@ -287,6 +291,7 @@ async def _fly(
         output=settings.output_mode, end_action=settings.end_action, state_source=request.state_source,
         set_guid_options=request.set_guid_options, experimental_output=request.experimental_output,
         ready_timeout_s=request.ready_timeout_s, takeoff_timeout_s=request.takeoff_timeout_s,
+        command_timeout_s=request.command_timeout_s,
         log_dir=request.log_dir or str(default_log_dir()), offboard_loss=request.offboard_loss,
     )  # fmt: skip
     hooks = FlightHooks(on_start=started, on_end=ended, fence=fence, config_path=request.config_path)

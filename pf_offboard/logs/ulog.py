@@ -91,6 +91,13 @@ def read_ulog(path: str | Path) -> ULogFlight:
         raise InputError(name, "no such file")
     if p.is_dir():
         raise InputError(name, "is a directory, not a ULog")
+    from pf_offboard.inputfile import check_bounded
+    from pf_offboard.logs.tlog import MAX_LOG_BYTES
+
+    try:  # a FIFO would block the header read below, a device or a huge file would be read on
+        check_bounded(p, MAX_LOG_BYTES)
+    except ValueError as exc:
+        raise InputError(name, str(exc)) from None
     try:
         from pyulog import ULog
     except ImportError:  # pragma: no cover - a dependency

@@ -189,7 +189,15 @@ def test_replay_recomputes_every_setpoint_that_flew(tmp_path, output: str) -> No
 
 
 def test_stale_state_stops_following_and_exits_3(tmp_path) -> None:
+    """The telemetry stops for good at 3 s: exit 3 "stale", no step after it. The hold request can
+    never be confirmed (nothing comes back), so it is retried for safety.safe_mode_timeout_s: 1 s
+    here instead of the default 10 s of waiting for nothing."""
+    import yaml
+
     config = write_config(tmp_path)
+    data = yaml.safe_load(config.read_text())
+    data["safety"] = {**data.get("safety", {}), "safe_mode_timeout_s": 1.0}
+    config.write_text(yaml.safe_dump(data))
     cfg = mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)), faults=FaultConfig(blackout_s=(3.0, 60.0)))
     with spawn(cfg) as mock:
         outcome = run_fly(mock.ports.udp, config, tmp_path / "log", "--airborne", "--duration", "30")
@@ -339,13 +347,13 @@ def test_end_action_land_hands_back_in_land_mode(tmp_path) -> None:
 
 
 
-def _fly_with_params(tmp_path, log_name: str, output: str, duration_s: float, prepare) -> tuple:
+def _fly_with_params(tmp_path, log_name: str, output: str, duration_s: float, prepare, *flags: str) -> tuple:
     """Fly ``--airborne`` on a PX4 mock whose parameters ``prepare(params dict)`` edited first;
     (outcome, the mock's mode at the end)."""
     config = write_config(tmp_path)
     with run_in_thread(mock_config("px4", "hover:" + ",".join(map(str, HOVER_NED)))) as mock:
         mock.call(lambda m: prepare(m.autopilot.params))
-        outcome = run_fly(mock.ports.udp, config, tmp_path / log_name, "--airborne", "--output", output, "--duration", str(duration_s))
+        outcome = run_fly(mock.ports.udp, config, tmp_path / log_name, "--airborne", "--output", output, "--duration", str(duration_s), *flags)
         return outcome, mock.call(lambda m: m.autopilot.mode.name)
 
 
@@ -415,13 +423,17 @@ def test_acceleration_output_reads_how_px4_tilts(tmp_path, decouple: int, scaled
         assert not np.allclose(sent, computed, atol=1e-3)
 
 
+# an unanswered read is given up after --command-timeout: 2 s here instead of 5 s of waiting for nothing
+UNANSWERED = ("--command-timeout", "2")
+
+
 def test_acceleration_output_without_an_answer_assumes_px4s_default(tmp_path, capsys) -> None:
     """An autopilot that does not answer for MPC_ACC_DECOUPLE (an older PX4): a warning says what
     is assumed (PX4's default, 1) and the flight goes on; a value that is neither 0 nor 1 is a
     link error (exit 3) before any mode change."""
     from pf_offboard.app.encoders import tilt_from_gravity_setpoint
 
-    outcome, _ = _fly_with_params(tmp_path, "log", "acceleration", 2, lambda params: params.pop("MPC_ACC_DECOUPLE"))
+    outcome, _ = _fly_with_params(tmp_path, "log", "acceleration", 2, lambda params: params.pop("MPC_ACC_DECOUPLE"), *UNANSWERED)
     assert outcome.exit_code == 0, outcome.reason
     err = capsys.readouterr().err
     assert "warning: parameter MPC_ACC_DECOUPLE: no PARAM_VALUE" in err and "assuming MPC_ACC_DECOUPLE = 1" in err, err
@@ -458,7 +470,7 @@ def test_acceleration_output_plans_within_the_autopilots_tilt_limit(tmp_path, ca
 def test_tilt_limit_unanswered_keeps_the_configs_and_nonsense_is_refused(tmp_path, capsys) -> None:
     """No answer for MPC_TILTMAX_AIR: a warning, the config's limit, the flight goes on. NaN, <= 0
     or > 90 deg: a link error naming the parameter (exit 3) before any mode change."""
-    outcome, _ = _fly_with_params(tmp_path, "log", "acceleration", 2, lambda params: params.pop("MPC_TILTMAX_AIR"))
+    outcome, _ = _fly_with_params(tmp_path, "log", "acceleration", 2, lambda params: params.pop("MPC_TILTMAX_AIR"), *UNANSWERED)
     assert outcome.exit_code == 0, outcome.reason
     err = capsys.readouterr().err
     assert "warning: parameter MPC_TILTMAX_AIR: no PARAM_VALUE" in err and "limits.max_tilt_deg = 50 deg" in err, err

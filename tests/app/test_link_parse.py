@@ -175,9 +175,9 @@ def test_ready_and_takeoff_timeouts_are_validated() -> None:
     parser = argparse.ArgumentParser()
     add_arguments(parser)
     args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", "x.yaml", "--takeoff", "2"])
-    assert args.ready_timeout == 120.0 and args.takeoff_timeout is None
+    assert args.ready_timeout == 120.0 and args.takeoff_timeout is None and args.command_timeout == 5.0
     _check_args(args)
-    for flag in ("--ready-timeout", "--takeoff-timeout"):
+    for flag in ("--ready-timeout", "--takeoff-timeout", "--command-timeout"):
         for bad in ("0", "nan", "-5"):
             args = parser.parse_args(["--connect", "udpin:0.0.0.0:14540", "--config", "x.yaml", "--takeoff", "2", flag, bad])
             with pytest.raises(InputError) as info:

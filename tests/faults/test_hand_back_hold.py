@@ -45,6 +45,7 @@ def test_ardupilot_hand_back_holds_with_the_throttle_stick_down(tmp_path) -> Non
         outcome, printed = fly_udpin(app_port, config, tmp_path / "log", "--airborne", "--duration", "3", "--output", "attitude",
                                      "--set-guid-options", on_start=on_start)  # fmt: skip
         alt_at_exit = mock.call(lambda m: -float(m.truth.position_ned_m[2]))
+        mock.call(lambda m: m.set_speed(8.0))  # the app has exited: the vehicle's next 4 s pass in 0.5 s
         _mock_time_passes(mock, 4.0)
         mode, armed, alt = mock.call(lambda m: (m.autopilot.mode.name, bool(m.autopilot.armed), -float(m.truth.position_ned_m[2])))
     print(f"\nhand-back with the throttle stick down: exit {outcome.exit_code}, {outcome.reason}; {mode} armed={armed}, "

@@ -23,7 +23,10 @@ def test_jitter_in_rates_mode_flies_or_ends_safely(tmp_path, profile: str) -> No
     flags = ["--airborne", "--output", "rates", "--duration", "6"]
     if profile == "ardupilot":
         flags.append("--set-guid-options")
-    with spawn(own_clock(profile, hover(), truth_log, jitter_s=0.05)) as mock:
+    # at real time (not own_clock's default half speed): the 6 s flight takes 6 s of wall time, not
+    # 12; a host too loaded to answer in time ends it in the hold (exit 3 / 5), which is allowed
+    # here, and the tilt bound holds either way
+    with spawn(own_clock(profile, hover(), truth_log, speed=1.0, jitter_s=0.05)) as mock:
         outcome = run_fly(mock.ports.udp, config, tmp_path / "log", *flags)
     truth = read_truth(truth_log)
     hold = "AUTO.LOITER" if profile == "px4" else "BRAKE"

@@ -124,9 +124,11 @@ def test_mock_with_signing_refuses_an_unsigned_app(tmp_path) -> None:
     key = _key_file(tmp_path, "key", "f" * 64)
     config = write_config(tmp_path)
     with run_in_thread(mock_config(app_port, signing_key_file=key)) as mock:
-        # --ready-timeout: the refused app waits for a position estimate that never comes
+        # --ready-timeout: the refused app waits for a position estimate that never comes;
+        # --command-timeout: each refused parameter read is given up after 1 s instead of 5 s (it
+        # is re-sent every 0.5 s meanwhile, so each is still refused more than once: ~20 s -> ~5 s)
         outcome, printed = fly_udpin(app_port, config, tmp_path / "log", "--airborne", "--duration", "4",
-                                     "--ready-timeout", "5", heartbeat_timeout_s=2.0)  # fmt: skip
+                                     "--ready-timeout", "2", "--command-timeout", "1", heartbeat_timeout_s=2.0)  # fmt: skip
         mode, armed, _ = _mock_state(mock)
         refused = mock.call(lambda m: m.rejected_signature)
         steps = mock.call(lambda m: m.steps)

@@ -59,6 +59,7 @@ def test_stop_while_offboard_is_in_flight_is_held_by_newer_evidence(tmp_path) ->
 
     with run_in_thread(cfg) as mock:
         outcome, printed = fly_udpin(app_port, config, tmp_path / "log", "--airborne", "--duration", "5", on_start=on_start)
+        mock.call(lambda m: m.set_speed(8.0))  # the app has exited: the vehicle's next 3 s pass in 0.4 s
         _mock_time_passes(mock, 3.0)  # > COM_OF_LOSS_T: an OFFBOARD left behind would have failed over to RTL by now
         modes = _modes(mock)
         mode, alt = mock.call(lambda m: (m.autopilot.mode.name, -float(m.truth.position_ned_m[2])))

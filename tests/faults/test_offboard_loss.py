@@ -95,6 +95,9 @@ def _kill_mid_flight(tmp_path: Path, profile: str, *flags: str) -> tuple[list[st
             asyncio.run_coroutine_threadsafe(mock.mock.wait_for(lambda m: m.time_s >= t_kill, 30.0), loop).result(35.0)
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait(10)
+            # nobody is on the link any more: the vehicle's remaining 8 s pass at 8x real time (the
+            # same physics steps; only the mock's wall-clock pacing changes): ~1 s instead of 8 s
+            mock.call(lambda m: m.set_speed(8.0))
             at_kill = mock.call(lambda m: np.array(m.truth.position_ned_m))
             t_end = t_kill + 8.0
             asyncio.run_coroutine_threadsafe(mock.mock.wait_for(lambda m: m.time_s >= t_end, 30.0), loop).result(35.0)

@@ -9,6 +9,7 @@ loopback UDP, the end state from the mock's side."""
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -40,21 +41,60 @@ class OtherController(Attacker):
     """A second controller (system 1, component 191, its own port) holding the vehicle where it is
     (a second app, a ground station's "hold here"): its setpoint follows the vehicle's position, so
     the fight is slow and only the detection ends it (a far target tilts the vehicle past the
-    envelope first, which ends the flight too, with exit 5)."""
+    envelope first, which ends the flight too, with exit 5).
 
-    def __init__(self, dest, mock, period_s: float) -> None:
+    Paced in vehicle time, not on a wall-clock thread: it sends from the mock's own loop (its
+    ``on_received`` hook) every 0.5-1.5 ``period_s`` of vehicle time (seeded), from ``start_after_s`` of vehicle
+    time into following on, but not before the app's grace for the echoes of its own setpoints
+    (ControllerWatch.own_grace_s, wall clock) is over: a fight that begins inside the grace lasts
+    as long as the grace in wall time, i.e. longer in vehicle time the faster the lockstep vehicle
+    runs. The lockstep vehicle advances only on the setpoints it receives, and the other
+    controller's datagram reaches the mock's socket before the app's next setpoint (which answers
+    telemetry sent after it), so the two controllers' shares of the fight no longer depend on how
+    fast the app runs: with a wall-clock 50 Hz sender started 0.5 s (wall) into following, a
+    loaded machine gave the other controller a larger share and a longer fight, which tilted the
+    vehicle or took it past the fence first (exit 5, ~1 run in 4 on ardupilot-attitude-echo)."""
+
+    def __init__(self, dest, mock, period_s: float, start_after_s: float = 0.5) -> None:
         super().__init__(dest, [], period_s=period_s, system=1, component=191)
         self.mock = mock
+        self.start_after_s = start_after_s
+        self.following = threading.Event()  # set by the app's side once it follows (see follow())
+        self._grace_over: Callable[[], bool] = lambda: True
+        self._next_s: float | None = None
+        self._rng = np.random.default_rng(0)
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            here = self.mock.call(lambda m: tuple(m.truth.position_ned_m))
-            self.messages = [_other_controller_setpoint(here)]
-            for msg in self.messages:
-                self.sock.sendto(msg.pack(self.mav), self.dest)
-                self.mav.seq = (self.mav.seq + 1) & 0xFF
-                self.sent += 1
-            self._stop.wait(self.period_s)
+    def follow(self, flight) -> None:
+        """The app began following (called on its side): its echo grace ends own_grace_s from now."""
+        clock, until = flight.clock, flight.clock() + flight.controllers.own_grace_s
+        self._grace_over = lambda: clock() > until
+        self.following.set()
+
+    def _on_received(self, msg, addr) -> None:  # on the mock's loop, for every frame it accepts
+        if not self.following.is_set() or addr == self.sock.getsockname():  # not on its own setpoints
+            return
+        m = self.mock.mock
+        if self._next_s is None:
+            self._next_s = m.time_s + self.start_after_s
+        if m.time_s + 1e-9 < self._next_s or not self._grace_over():
+            return
+        # the next one 0.5..1.5 periods on (seeded): a fixed period would alias with the autopilot's
+        # 10 Hz target echo (ArduPilot echoes only a position target flown at that instant), so the
+        # evidence would come every time or never depending on the phase
+        self._next_s = max(self._next_s + self.period_s * (0.5 + self._rng.random()), m.time_s)
+        self.messages = [_other_controller_setpoint(tuple(m.truth.position_ned_m))]
+        for out in self.messages:
+            self.sock.sendto(out.pack(self.mav), self.dest)
+            self.mav.seq = (self.mav.seq + 1) & 0xFF
+            self.sent += 1
+
+    def start(self) -> OtherController:
+        self.mock.call(lambda m: setattr(m, "on_received", self._on_received))
+        return self
+
+    def stop(self) -> None:
+        self.mock.call(lambda m: setattr(m, "on_received", None))
+        self.sock.close()
 
 
 @pytest.mark.parametrize(
@@ -73,26 +113,22 @@ def test_a_second_controller_during_the_flight_ends_it_in_the_hold(tmp_path, pro
     flags = ["--airborne", "--duration", "30", "--output", output]
     if profile == "ardupilot":
         flags.append("--set-guid-options")
-    started: list[Attacker] = []
     with run_in_thread(mock_config(app_port, profile=profile, relay_setpoints=relay)) as mock:
-        other = OtherController(("127.0.0.1", mock.ports.udp), mock, 0.02)
+        other = OtherController(("127.0.0.1", mock.ports.udp), mock, 0.03).start()
 
         def on_start(flight) -> None:
             original = flight._activate
 
             def activate() -> None:
                 original()
-                if not started:  # the other controller starts 0.5 s (wall) into following
-                    started.append(other)
-                    threading.Timer(0.5, other.start).start()
+                other.follow(flight)  # the other controller starts 0.5 s (vehicle time) into following, after the echo grace
 
             flight._activate = activate
 
         try:
             outcome, printed = fly_udpin(app_port, config, tmp_path / "log", *flags, on_start=on_start)
         finally:
-            if started:
-                other.stop()
+            other.stop()
         mode, armed, position_enu, events = mock.call(lambda m: (
             m.autopilot.mode.name, bool(m.autopilot.armed), ned_to_enu(np.array(m.truth.position_ned_m)),
             [e.text for e in m.autopilot.log]))  # fmt: skip
@@ -101,7 +137,7 @@ def test_a_second_controller_during_the_flight_ends_it_in_the_hold(tmp_path, pro
     modes = [e for e in events if e.startswith("mode ")]
     print(f"\n{profile} {output} relay={relay}: exit {outcome.exit_code}, {outcome.reason}; other sent {other.sent}, "
           f"mock relayed {relayed}; vehicle {mode} at {position_enu.round(2)}; modes {modes}")  # fmt: skip
-    assert started and other.sent > 0
+    assert other.following.is_set() and other.sent > 0
     assert outcome.exit_code == 8, printed
     assert "another controller is flying the vehicle" in outcome.reason
     assert f"{hold} requested, confirmed" in outcome.reason

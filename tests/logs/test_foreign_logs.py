@@ -66,3 +66,30 @@ def test_replay_names_the_missing_log_and_refuses_a_ulog(tmp_path, capsys, monke
     shutil.copy(ULOG, tmp_path / "f.ulg")
     assert main(["replay", "f.ulg"]) == 2
     assert "f.ulg: is a PX4 ULog" in capsys.readouterr().err
+
+
+def test_a_fifo_a_device_or_a_huge_file_never_reaches_pymavlink_or_pyulog(tmp_path) -> None:
+    """The lenient readers hand the file to pymavlink / pyulog, which block on a FIFO and scan a huge
+    file to its end (a 3 GiB sparse file took seconds per read in the CLI fuzz): refused first, each
+    with one reason naming the file, as the strict reader refuses them."""
+    import os
+    import time
+
+    import pytest
+
+    from pf_offboard.errors import InputError
+    from pf_offboard.logs.foreign import iter_tlog_lenient
+    from pf_offboard.logs.ulog import read_ulog
+
+    os.mkfifo(tmp_path / "fifo.tlog", 0o600)
+    with open(tmp_path / "huge.tlog", "wb") as fh:  # sparse: takes no space
+        fh.truncate(3 << 30)
+    readers = (lambda p: list(iter_tlog_lenient(p)), read_foreign_tlog, read_ulog)
+    cases = ((tmp_path / "fifo.tlog", "a FIFO"), (tmp_path / "huge.tlog", "larger than the 2.0 GiB"), (Path("/dev/zero"), "a character device"))
+    for read in readers:
+        for path, reason in cases:
+            started = time.monotonic()
+            with pytest.raises(InputError) as err:
+                read(path)
+            assert reason in str(err.value) and str(path) in str(err.value)
+            assert time.monotonic() - started < 1.0  # refused, not read

@@ -77,3 +77,25 @@ def test_spawned_subprocess_serves_and_stops() -> None:
         att = client.wait("ATTITUDE", timeout_s=5.0)
         assert att.time_boot_ms == 12  # 100 Hz: due after the third 4 ms lockstep step
     assert handle.process.returncode is not None
+
+
+def test_set_speed_changes_the_own_clocks_pace_and_is_refused_in_lockstep() -> None:
+    """`set_speed` (the offboard-loss tests run the vehicle's last seconds faster once the app is
+    gone): at 1x, 4 s of vehicle time cannot pass in 1.5 s of wall time; at 20x they do; a
+    lockstep mock has no pace to change."""
+    import asyncio
+
+    own = MockConfig(vehicle="fast", spawn=SpawnSpec.parse("hover:0,0,-2"), udp_local_port=0, udp_remote=None, speed=1.0)
+    with run_in_thread(own) as mock:
+        t0 = mock.call(lambda m: m.time_s)
+        slow = asyncio.run_coroutine_threadsafe(mock.mock.wait_for(lambda m: m.time_s >= t0 + 4.0, 1.5), mock._loop).result(5.0)
+        mock.call(lambda m: m.set_speed(20.0))
+        t1 = mock.call(lambda m: m.time_s)
+        fast = asyncio.run_coroutine_threadsafe(mock.mock.wait_for(lambda m: m.time_s >= t1 + 4.0, 1.5), mock._loop).result(5.0)
+        with pytest.raises(ValueError, match="speed"):
+            mock.call(lambda m: m.set_speed(float("nan")))
+    assert not slow and fast
+    lockstep = MockConfig(vehicle="fast", spawn=SpawnSpec.parse("hover:0,0,-2"), udp_local_port=0, udp_remote=None, lockstep=True)
+    with run_in_thread(lockstep) as mock:
+        with pytest.raises(ValueError, match="lockstep"):
+            mock.call(lambda m: m.set_speed(2.0))
