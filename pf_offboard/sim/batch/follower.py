@@ -22,6 +22,7 @@ from pf_offboard.control.compensator import (
     ADAPT_GAIN_SLEW,
     ADAPT_SLEW,
     ADOPT_VERTICAL,
+    MAX_DRAG_FEEDBACK_M_S2,
     MAX_GAP_S,
     OFFSET_INTEGRAL_BAND_M,
 )
@@ -413,12 +414,20 @@ class _Compensator:
         lag = self.lag
         return (accel[0] + lag[0] * jerk[0], accel[1] + lag[1] * jerk[1], accel[2] + lag[2] * jerk[2])
 
-    def invert(self, accel: V, velocity_pred: V) -> V:
-        d = self.disturbance
+    def invert(self, accel: V, velocity_pred: V, velocity_ref: V) -> V:
+        """``InnerLoopCompensator.invert`` with its reference velocity (``drag_velocity``)."""
+        d, c = self.disturbance, self.drag
+        vd = []
+        for i in range(3):
+            ci = np.asarray(c[i], dtype=float)
+            dv = velocity_pred[i] - velocity_ref[i]
+            with np.errstate(divide="ignore"):
+                lim = np.where(ci > 0.0, MAX_DRAG_FEEDBACK_M_S2 / np.where(ci > 0.0, ci, 1.0), np.inf)
+            vd.append(velocity_ref[i] + np.minimum(lim, np.maximum(-lim, dv)))
         return (
-            (accel[0] + self.drag[0] * velocity_pred[0] - d[0]) / self.gain[0],
-            (accel[1] + self.drag[1] * velocity_pred[1] - d[1]) / self.gain[1],
-            (accel[2] + self.drag[2] * velocity_pred[2] - d[2]) / self.gain[2],
+            (accel[0] + c[0] * vd[0] - d[0]) / self.gain[0],
+            (accel[1] + c[1] * vd[1] - d[1]) / self.gain[1],
+            (accel[2] + c[2] * vd[2] - d[2]) / self.gain[2],
         )
 
     @property
@@ -693,7 +702,8 @@ class BatchFollower:
             ax, ay, az = res.accel
             jerk = self._onpath_jerk(eta2_ref, deta2, ddeta2, w, tan, s_ss, s_sss)
             if comp is not None:
-                sp = comp.invert(comp.lead((ax, ay, az), jerk), v)
+                v_ref = (tan[0] * eta2_ref, tan[1] * eta2_ref, tan[2] * eta2_ref)
+                sp = comp.invert(comp.lead((ax, ay, az), jerk), v, v_ref)
                 ax, ay, az = comp.commit(t_s, sp, law.thrust_set.clip)
                 zero = np.zeros_like(ax)
                 jerk_rates: V = (zero, zero, zero)
