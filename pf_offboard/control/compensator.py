@@ -94,6 +94,32 @@ def drag_velocity(drag: Vec, velocity: Vec, reference: Vec) -> Vec:
     return (out[0], out[1], out[2])
 
 
+# Faster than the reference by more than this (m/s), the compensation's push along the velocity
+# (drag and disturbance cancelled, c v - d) is scaled by (reference + margin) / speed, as if flown
+# at the reference: it cancels drag, so without this it also cancels the vehicle's own braking,
+# and once the thrust limits clip the command (a tight turn flown too fast: the centripetal demand
+# grows with v^2) the law's bounded braking is clipped with it. Real PX4 SIH's 3 m/s helix ran
+# away that way with no adoption at all (acceleration output, d-hat -3 m/s^2 along the velocity,
+# 3.9 m/s against 2.4, fence exit). Only ever less push forward: a braking-direction change.
+OVERSPEED_MARGIN_M_S = 0.25
+
+
+def overspeed_bounded(push: Vec, velocity: Vec, reference: Vec) -> Vec:
+    """``push`` (m/s^2 ENU) with its component along ``velocity``, when positive, scaled by
+    ``(|reference| + OVERSPEED_MARGIN_M_S) / |velocity|`` when that is below one."""
+    sp2 = velocity[0] * velocity[0] + velocity[1] * velocity[1] + velocity[2] * velocity[2]
+    ref = math.sqrt(reference[0] * reference[0] + reference[1] * reference[1] + reference[2] * reference[2])
+    lim = ref + OVERSPEED_MARGIN_M_S
+    if sp2 <= lim * lim:
+        return push
+    sp = math.sqrt(sp2)
+    along = (push[0] * velocity[0] + push[1] * velocity[1] + push[2] * velocity[2]) / sp
+    if along <= 0.0:
+        return push
+    k = along * (1.0 - lim / sp) / sp  # the part removed, along the unit velocity
+    return (push[0] - k * velocity[0], push[1] - k * velocity[1], push[2] - k * velocity[2])
+
+
 class InnerLoopCompensator:
     """Stateful, I/O-free. Call :meth:`predict` with each fresh state sample, then :meth:`invert`
     with the law's acceleration; :meth:`invert` records the setpoint it returns as sent.
@@ -361,12 +387,12 @@ class InnerLoopCompensator:
         wrong fit, within its bounds) it outgrew the law's bounded tangential correction and the
         vehicle ran away (docs/design-decisions.md, "Drag inversion bounded")."""
         d, c = self.disturbance, self.drag
-        vd = velocity_pred if velocity_ref is None else drag_velocity(c, velocity_pred, velocity_ref)
-        return (
-            (accel[0] + c[0] * vd[0] - d[0]) / self.gain[0],
-            (accel[1] + c[1] * vd[1] - d[1]) / self.gain[1],
-            (accel[2] + c[2] * vd[2] - d[2]) / self.gain[2],
-        )
+        if velocity_ref is None:
+            b = (c[0] * velocity_pred[0] - d[0], c[1] * velocity_pred[1] - d[1], c[2] * velocity_pred[2] - d[2])
+        else:
+            vd = drag_velocity(c, velocity_pred, velocity_ref)
+            b = overspeed_bounded((c[0] * vd[0] - d[0], c[1] * vd[1] - d[1], c[2] * vd[2] - d[2]), velocity_pred, velocity_ref)
+        return ((accel[0] + b[0]) / self.gain[0], (accel[1] + b[1]) / self.gain[1], (accel[2] + b[2]) / self.gain[2])
 
     @property
     def holds(self) -> bool:

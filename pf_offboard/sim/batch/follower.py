@@ -24,6 +24,7 @@ from pf_offboard.control.compensator import (
     ADOPT_VERTICAL,
     MAX_DRAG_FEEDBACK_M_S2,
     MAX_GAP_S,
+    OVERSPEED_MARGIN_M_S,
     OFFSET_INTEGRAL_BAND_M,
 )
 from pf_offboard.control.types import GRAVITY_M_S2
@@ -424,11 +425,17 @@ class _Compensator:
             with np.errstate(divide="ignore"):
                 lim = np.where(ci > 0.0, MAX_DRAG_FEEDBACK_M_S2 / np.where(ci > 0.0, ci, 1.0), np.inf)
             vd.append(velocity_ref[i] + np.minimum(lim, np.maximum(-lim, dv)))
-        return (
-            (accel[0] + c[0] * vd[0] - d[0]) / self.gain[0],
-            (accel[1] + c[1] * vd[1] - d[1]) / self.gain[1],
-            (accel[2] + c[2] * vd[2] - d[2]) / self.gain[2],
-        )
+        b = [c[i] * vd[i] - d[i] for i in range(3)]
+        v, r = velocity_pred, velocity_ref
+        # overspeed_bounded, per flight
+        sp2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+        lim = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]) + OVERSPEED_MARGIN_M_S
+        fast = sp2 > lim * lim
+        sp = np.sqrt(np.where(fast, sp2, 1.0))
+        along = (b[0] * v[0] + b[1] * v[1] + b[2] * v[2]) / sp
+        k = np.where(fast & (along > 0.0), along * (1.0 - lim / sp) / sp, 0.0)
+        b = [np.where(k != 0.0, b[i] - k * v[i], b[i]) for i in range(3)]
+        return ((accel[0] + b[0]) / self.gain[0], (accel[1] + b[1]) / self.gain[1], (accel[2] + b[2]) / self.gain[2])
 
     @property
     def holds(self) -> bool:
