@@ -23,7 +23,9 @@ Per control step, world frame ENU (m, m/s, m/s²):
    on it; the lag stays part of the plant (the follower leads it with the on-path jerk).
 3. **Inversion**: the law's acceleration ``a`` becomes ``a_sp = (a + drag ⊙ v̂ − d̂) / gain``,
    after the lag is led along the path (:meth:`InnerLoopCompensator.lead`, which replaces the
-   roll/pitch body-rate feed-forward).
+   roll/pitch body-rate feed-forward). ``v̂`` there is the on-path reference velocity plus the
+   predicted velocity's deviation from it, the deviation's drag bounded per axis to
+   ``MAX_DRAG_FEEDBACK_M_S2`` (drag inverted at the velocity is positive velocity feedback).
 
 With ``d̂ = d`` the loop is the nominal one, so the path stays invariant; the observer adds no
 explicit time dependence (its state is driven by the measurements only). ``reset()`` forgets
@@ -67,6 +69,55 @@ ADOPT_VERTICAL = True  # a joint model's vertical gain and drag are adopted with
 LONG_LAG_MIN_DELAY_S = 0.06
 LONG_LAG_MAX_FACTOR = 1.5
 LONG_LAG_RESPONSE_SLACK_S = 0.03
+
+
+# The drag inversion's feedback on the velocity's deviation from the on-path reference velocity,
+# per axis (m/s^2): c * (v - v_ref) is positive velocity feedback, so it stays below the law's
+# tangential correction bound (limits.max_tangential_accel_m_s2, 1.5 by default) and the law's
+# bounded corrections always dominate, whatever drag (0-3 1/s) the identifier fitted. Unbounded, a
+# fitted 0.94 1/s ran real PX4 SIH's 3 m/s helix away (3.9 m/s, fence) and a wrong 3 1/s the
+# px4-sih mock's (9.8 m/s, 59 m off); the feed-forward at the reference speed stays whole.
+MAX_DRAG_FEEDBACK_M_S2 = 0.5
+
+
+def drag_velocity(drag: Vec, velocity: Vec, reference: Vec) -> Vec:
+    """The velocity the drag is inverted at: ``reference + dv`` with ``drag * dv`` the deviation's
+    share bounded per axis by MAX_DRAG_FEEDBACK_M_S2 (``dv = velocity - reference`` when smaller)."""
+    out = []
+    for i in range(3):
+        dv = velocity[i] - reference[i]
+        c = drag[i]
+        if c > 0.0:
+            lim = MAX_DRAG_FEEDBACK_M_S2 / c
+            dv = lim if dv > lim else (-lim if dv < -lim else dv)
+        out.append(reference[i] + dv)
+    return (out[0], out[1], out[2])
+
+
+# Faster than the reference by more than this (m/s), the compensation's push along the velocity
+# (drag and disturbance cancelled, c v - d) is scaled by (reference + margin) / speed, as if flown
+# at the reference: it cancels drag, so without this it also cancels the vehicle's own braking,
+# and once the thrust limits clip the command (a tight turn flown too fast: the centripetal demand
+# grows with v^2) the law's bounded braking is clipped with it. Real PX4 SIH's 3 m/s helix ran
+# away that way with no adoption at all (acceleration output, d-hat -3 m/s^2 along the velocity,
+# 3.9 m/s against 2.4, fence exit). Only ever less push forward: a braking-direction change.
+OVERSPEED_MARGIN_M_S = 0.25
+
+
+def overspeed_bounded(push: Vec, velocity: Vec, reference: Vec) -> Vec:
+    """``push`` (m/s^2 ENU) with its component along ``velocity``, when positive, scaled by
+    ``(|reference| + OVERSPEED_MARGIN_M_S) / |velocity|`` when that is below one."""
+    sp2 = velocity[0] * velocity[0] + velocity[1] * velocity[1] + velocity[2] * velocity[2]
+    ref = math.sqrt(reference[0] * reference[0] + reference[1] * reference[1] + reference[2] * reference[2])
+    lim = ref + OVERSPEED_MARGIN_M_S
+    if sp2 <= lim * lim:
+        return push
+    sp = math.sqrt(sp2)
+    along = (push[0] * velocity[0] + push[1] * velocity[1] + push[2] * velocity[2]) / sp
+    if along <= 0.0:
+        return push
+    k = along * (1.0 - lim / sp) / sp  # the part removed, along the unit velocity
+    return (push[0] - k * velocity[0], push[1] - k * velocity[1], push[2] - k * velocity[2])
 
 
 class InnerLoopCompensator:
@@ -325,15 +376,23 @@ class InnerLoopCompensator:
         lag = self.lag
         return (accel[0] + lag[0] * jerk[0], accel[1] + lag[1] * jerk[1], accel[2] + lag[2] * jerk[2])
 
-    def invert(self, time_s: float, accel: Vec, velocity_pred: Vec) -> Vec:
+    def invert(self, time_s: float, accel: Vec, velocity_pred: Vec, velocity_ref: Vec | None = None) -> Vec:
         """Setpoint that makes the modelled vehicle accelerate at ``accel`` (ENU, gravity excluded)
-        at the predicted velocity. Not recorded: call :meth:`record` with what is really sent."""
-        d = self.disturbance
-        return (
-            (accel[0] + self.drag[0] * velocity_pred[0] - d[0]) / self.gain[0],
-            (accel[1] + self.drag[1] * velocity_pred[1] - d[1]) / self.gain[1],
-            (accel[2] + self.drag[2] * velocity_pred[2] - d[2]) / self.gain[2],
-        )
+        at the predicted velocity. Not recorded: call :meth:`record` with what is really sent.
+
+        ``velocity_ref`` (the law's on-path velocity, tangent x reference speed): the drag is
+        inverted at it plus the predicted velocity's deviation from it, that deviation's share
+        bounded per axis to ``MAX_DRAG_FEEDBACK_M_S2`` (:func:`drag_velocity`). Inverting the drag
+        at the velocity is positive velocity feedback: with a model drag above the vehicle's (a
+        wrong fit, within its bounds) it outgrew the law's bounded tangential correction and the
+        vehicle ran away (docs/design-decisions.md, "Drag inversion bounded")."""
+        d, c = self.disturbance, self.drag
+        if velocity_ref is None:
+            b = (c[0] * velocity_pred[0] - d[0], c[1] * velocity_pred[1] - d[1], c[2] * velocity_pred[2] - d[2])
+        else:
+            vd = drag_velocity(c, velocity_pred, velocity_ref)
+            b = overspeed_bounded((c[0] * vd[0] - d[0], c[1] * vd[1] - d[1], c[2] * vd[2] - d[2]), velocity_pred, velocity_ref)
+        return ((accel[0] + b[0]) / self.gain[0], (accel[1] + b[1]) / self.gain[1], (accel[2] + b[2]) / self.gain[2])
 
     @property
     def holds(self) -> bool:

@@ -610,7 +610,9 @@ class PathFollower:
             # lag's phase is inverted along the path by leading with lag * jerk. That lead
             # replaces the roll/pitch rate feed-forward: the attitude loop tracks the led
             # setpoint, and omega_ff on top of it would lead twice
-            sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v)
+            # the drag is inverted at the on-path reference velocity, the deviation's share bounded
+            v_ref = (tan[0] * eta2_ref, tan[1] * eta2_ref, tan[2] * eta2_ref)
+            sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v, v_ref)
             # feasible, recorded, and the faster axis group's held back (InnerLoopCompensator.horizon_s)
             ax, ay, az = comp.commit(t_s, sp, law.thrust_set.clip)
             jerk_rates: Vec = (0.0, 0.0, 0.0)

@@ -16,7 +16,13 @@ import numpy as np
 import pytest
 
 from pf_offboard.control import Compensation, Gains, Limits, PathFollower, VehicleModel
-from pf_offboard.control.compensator import InnerLoopCompensator
+from pf_offboard.control.compensator import (
+    MAX_DRAG_FEEDBACK_M_S2,
+    OVERSPEED_MARGIN_M_S,
+    InnerLoopCompensator,
+    drag_velocity,
+    overspeed_bounded,
+)
 from pf_offboard.control.tuning import gains_for_vehicle, phase_margin_deg
 from pf_offboard.errors import InputError
 from pf_offboard.path import Path
@@ -197,6 +203,32 @@ def test_inversion_gives_the_requested_acceleration() -> None:
     drag = (MODEL.drag_xy_1_s, MODEL.drag_xy_1_s, MODEL.drag_z_1_s)
     flown = [gain[i] * sp[i] - drag[i] * v[i] + comp.disturbance[i] for i in range(3)]
     assert np.allclose(flown, a, atol=1e-12)
+
+
+def test_drag_feedback_on_the_deviation_from_the_reference_velocity_is_bounded() -> None:
+    """Drag inverted at the velocity is positive velocity feedback: with the reference velocity the
+    inversion feeds the drag forward at it and adds at most MAX_DRAG_FEEDBACK_M_S2 per axis for
+    the deviation, whatever the drag (the fit's bound, 3 1/s) and however fast the vehicle flies."""
+    drag, v_ref = (3.0, 3.0, 0.0), (2.4, 0.0, 0.1)
+    small = (2.5, 0.05, 0.3)  # within the bound: exactly the velocity
+    assert drag_velocity(drag, small, v_ref) == pytest.approx(small, abs=1e-12)
+    for fast in ((3.9, 0.0, 0.1), (9.0, -4.0, 2.0)):
+        vd = drag_velocity(drag, fast, v_ref)
+        assert all(abs(drag[i] * (vd[i] - v_ref[i])) <= MAX_DRAG_FEEDBACK_M_S2 + 1e-12 for i in range(2))
+        assert vd[2] == pytest.approx(fast[2])  # no drag on the axis: nothing fed back
+
+
+def test_overspeed_scales_only_the_forward_push() -> None:
+    """Faster than the reference by more than the margin, the compensation's push along the velocity
+    is scaled to the reference's: the perpendicular part and any braking push are kept."""
+    v, ref = (4.0, 0.0, 0.0), (2.4, 0.0, 0.0)
+    out = overspeed_bounded((3.0, 1.0, -0.5), v, ref)
+    assert out == pytest.approx((3.0 * (2.4 + OVERSPEED_MARGIN_M_S) / 4.0, 1.0, -0.5), abs=1e-12)
+    assert overspeed_bounded((-3.0, 1.0, 0.0), v, ref) == (-3.0, 1.0, 0.0)  # braking: kept
+    assert overspeed_bounded((3.0, 1.0, 0.0), (2.5, 0.0, 0.0), ref) == (3.0, 1.0, 0.0)  # within the margin
+    comp = InnerLoopCompensator(VehicleModel(drag_xy_1_s=1.0))
+    sp = comp.invert(0.0, (0.0, 0.0, 0.0), v, ref)  # drag 1 1/s at 4 m/s: 2.9 m/s (feedback bound), scaled
+    assert sp[0] == pytest.approx((2.4 + MAX_DRAG_FEEDBACK_M_S2) * (2.4 + OVERSPEED_MARGIN_M_S) / 4.0, abs=1e-12)
 
 
 def test_bad_settings_are_named() -> None:

@@ -22,7 +22,9 @@ from pf_offboard.control.compensator import (
     ADAPT_GAIN_SLEW,
     ADAPT_SLEW,
     ADOPT_VERTICAL,
+    MAX_DRAG_FEEDBACK_M_S2,
     MAX_GAP_S,
+    OVERSPEED_MARGIN_M_S,
     OFFSET_INTEGRAL_BAND_M,
 )
 from pf_offboard.control.types import GRAVITY_M_S2
@@ -413,13 +415,27 @@ class _Compensator:
         lag = self.lag
         return (accel[0] + lag[0] * jerk[0], accel[1] + lag[1] * jerk[1], accel[2] + lag[2] * jerk[2])
 
-    def invert(self, accel: V, velocity_pred: V) -> V:
-        d = self.disturbance
-        return (
-            (accel[0] + self.drag[0] * velocity_pred[0] - d[0]) / self.gain[0],
-            (accel[1] + self.drag[1] * velocity_pred[1] - d[1]) / self.gain[1],
-            (accel[2] + self.drag[2] * velocity_pred[2] - d[2]) / self.gain[2],
-        )
+    def invert(self, accel: V, velocity_pred: V, velocity_ref: V) -> V:
+        """``InnerLoopCompensator.invert`` with its reference velocity (``drag_velocity``)."""
+        d, c = self.disturbance, self.drag
+        vd = []
+        for i in range(3):
+            ci = np.asarray(c[i], dtype=float)
+            dv = velocity_pred[i] - velocity_ref[i]
+            with np.errstate(divide="ignore"):
+                lim = np.where(ci > 0.0, MAX_DRAG_FEEDBACK_M_S2 / np.where(ci > 0.0, ci, 1.0), np.inf)
+            vd.append(velocity_ref[i] + np.minimum(lim, np.maximum(-lim, dv)))
+        b = [c[i] * vd[i] - d[i] for i in range(3)]
+        v, r = velocity_pred, velocity_ref
+        # overspeed_bounded, per flight
+        sp2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+        lim = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]) + OVERSPEED_MARGIN_M_S
+        fast = sp2 > lim * lim
+        sp = np.sqrt(np.where(fast, sp2, 1.0))
+        along = (b[0] * v[0] + b[1] * v[1] + b[2] * v[2]) / sp
+        k = np.where(fast & (along > 0.0), along * (1.0 - lim / sp) / sp, 0.0)
+        b = [np.where(k != 0.0, b[i] - k * v[i], b[i]) for i in range(3)]
+        return ((accel[0] + b[0]) / self.gain[0], (accel[1] + b[1]) / self.gain[1], (accel[2] + b[2]) / self.gain[2])
 
     @property
     def holds(self) -> bool:
@@ -693,7 +709,8 @@ class BatchFollower:
             ax, ay, az = res.accel
             jerk = self._onpath_jerk(eta2_ref, deta2, ddeta2, w, tan, s_ss, s_sss)
             if comp is not None:
-                sp = comp.invert(comp.lead((ax, ay, az), jerk), v)
+                v_ref = (tan[0] * eta2_ref, tan[1] * eta2_ref, tan[2] * eta2_ref)
+                sp = comp.invert(comp.lead((ax, ay, az), jerk), v, v_ref)
                 ax, ay, az = comp.commit(t_s, sp, law.thrust_set.clip)
                 zero = np.zeros_like(ax)
                 jerk_rates: V = (zero, zero, zero)
