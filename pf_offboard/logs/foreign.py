@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from pf_offboard import frames
 from pf_offboard.errors import InputError
+from pf_offboard.logs.tlog import check_log_file
 
 PLOT_RATE_HZ = 50.0  # tracks are resampled to this for the figures
 _ARMED = 128
@@ -88,20 +89,6 @@ def read_ulog_tracks(path: str | Path) -> list[ForeignTrack]:
     return out
 
 
-def _check_log_file(p: Path) -> None:
-    """A missing file, a FIFO, a device or one beyond the log size limit is refused before
-    pymavlink opens it (it would block on a FIFO and scan a huge file to its end)."""
-    from pf_offboard.inputfile import check_bounded
-    from pf_offboard.logs.tlog import MAX_LOG_BYTES
-
-    if not p.exists():
-        raise InputError(str(p), "no such file")
-    try:
-        check_bounded(p, MAX_LOG_BYTES)
-    except ValueError as exc:
-        raise InputError(str(p), str(exc)) from None
-
-
 def read_foreign_tlog(path: str | Path) -> ForeignTrack:
     """A ground station's tlog (QGroundControl, MAVProxy), leniently: undecodable records are
     skipped and counted; LOCAL_POSITION_NED gives the track, the autopilot's HEARTBEAT the mode."""
@@ -109,7 +96,7 @@ def read_foreign_tlog(path: str | Path) -> ForeignTrack:
 
     p = Path(path)
     name = str(p)
-    _check_log_file(p)
+    check_log_file(p)
     try:
         conn = mavutil.mavlink_connection(name, dialect="common", robust_parsing=True)
     except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on a bad file
@@ -184,7 +171,7 @@ def iter_tlog_lenient(path: str | Path, own_component_ids: tuple[int, ...] = (19
     from pf_offboard.logs.tlog import TlogEntry
 
     p = Path(path)
-    _check_log_file(p)
+    check_log_file(p)
     try:
         conn = mavutil.mavlink_connection(str(p), dialect="common", robust_parsing=True)
     except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on a bad file

@@ -50,6 +50,20 @@ Direction = Literal["in", "out"]
 MAX_LOG_BYTES = 2 << 30
 
 
+def check_log_file(p: Path) -> None:
+    """A missing file, a FIFO, a device or one beyond the log size limit is refused (one
+    :class:`InputError` naming the file) before a library (pymavlink, pyulog) opens it: it would
+    block on a FIFO and read a huge file or a device on and on."""
+    from pf_offboard.inputfile import check_bounded
+
+    if not p.exists():
+        raise InputError(str(p), "no such file")
+    try:
+        check_bounded(p, MAX_LOG_BYTES)
+    except ValueError as exc:
+        raise InputError(str(p), str(exc)) from None
+
+
 class LogError(InputError):
     """A log file is corrupt, truncated or not in the expected format.
 

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pf_offboard.errors import InputError
+from pf_offboard.logs.tlog import check_log_file
 
 NAV_STATE_OFFBOARD = 14
 ARMING_STATE_ARMED = 2
@@ -87,17 +88,9 @@ def read_ulog(path: str | Path) -> ULogFlight:
     """Read a ``.ulg`` (InputError naming the file when it is missing or not a usable ULog)."""
     p = Path(path)
     name = str(p)
-    if not p.exists():
-        raise InputError(name, "no such file")
     if p.is_dir():
         raise InputError(name, "is a directory, not a ULog")
-    from pf_offboard.inputfile import check_bounded
-    from pf_offboard.logs.tlog import MAX_LOG_BYTES
-
-    try:  # a FIFO would block the header read below, a device or a huge file would be read on
-        check_bounded(p, MAX_LOG_BYTES)
-    except ValueError as exc:
-        raise InputError(name, str(exc)) from None
+    check_log_file(p)  # missing, a FIFO (would block the header read), a device or a huge file
     try:
         from pyulog import ULog
     except ImportError:  # pragma: no cover - a dependency
