@@ -22,7 +22,7 @@ import numpy as np
 from pf_offboard.app.encoders import Encoded, Encoder
 from pf_offboard.app.estimator import Estimator, StateEstimate
 from pf_offboard.logs.steplog import StepRecord
-from pf_offboard.logs.summary import identified_event
+from pf_offboard.logs.summary import identified_event, rolled_back_event
 
 _NAN3 = (math.nan, math.nan, math.nan)
 _NAN4 = (math.nan, math.nan, math.nan, math.nan)
@@ -106,6 +106,7 @@ class Pipeline:
         self._timed = getattr(follower, "compensator", None) is not None or bool(getattr(follower, "needs_time", False))
         self._was_active = False
         self._identified: Any = None  # the last adopted inner-loop model logged
+        self._rolled_back: Any = None  # the last rollback logged
         self._rates_reference = False  # the rates output's attitude reference engaged (logged when it changes)
         speed = getattr(follower, "speed", math.nan)
         self.speed_ref_m_s = float(speed) if isinstance(speed, (int, float)) else math.nan
@@ -161,7 +162,15 @@ class Pipeline:
             encoded = self.encoder.hold(est, stamp, f"controller failed: {exc}")
         else:
             encoded = self.encoder.encode(cmd, est, stamp)
-        model = getattr(getattr(self.follower, "compensator", None), "identified", None)
+        comp = getattr(self.follower, "compensator", None)
+        rb = getattr(comp, "rolled_back", None)
+        if rb is not None and rb is not self._rolled_back:  # the guard undid an adoption: logged once
+            self._rolled_back = rb
+            m = rb.rejected
+            events.append(rolled_back_event(m.lag_s, m.delay_s, m.drag_1_s, m.gain_xy, rb.cross_track_rms_m, rb.reference_cross_track_rms_m,
+                                            rb.speed_error_rms_m_s, rb.reference_speed_error_rms_m_s))  # fmt: skip
+            self._identified = getattr(comp, "identified", None)  # the model flown before: no new adoption
+        model = getattr(comp, "identified", None)
         if model is not None and model is not self._identified:  # an adoption: logged once, for the summary and replay
             self._identified = model
             events.append(identified_event(model.lag_s, model.delay_s, model.drag_1_s, model.gain_xy, model.gain_z, model.drag_z_1_s))

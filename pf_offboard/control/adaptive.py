@@ -215,6 +215,7 @@ class ResponseIdentifier:
         self.allowed = tuple(k for k in range(self.n_bank)  # the bank's candidates that may be adopted
                              if self.lags[k % nl] <= lag0
                              or floor <= self.delays[k // nl] <= ceiling - self.lags[k % nl])  # fmt: skip
+        self.rejected: frozenset[int] = frozenset()  # candidates the rollback guard undid: never adopted again
         self.reset()
 
     def reset(self) -> None:
@@ -232,6 +233,14 @@ class ResponseIdentifier:
         self.active: int | None = None
         # the settling of the joint bank's best: (index, since s, gain min/max, drag min/max)
         self._settle: tuple[int, float, float, float, float, float] | None = None
+
+    def reject(self, k: int, previous: int | None) -> None:
+        """The rollback guard undid candidate ``k``'s adoption: it is never adopted again (its
+        score and fit go on) and ``previous`` (the candidate active before it; None: the initial
+        model) is the active one again."""
+        self.rejected = self.rejected | {k}
+        self.allowed = tuple(j for j in self.allowed if j != k)
+        self.active, self._settle = previous, None
 
     def candidate(self, k: int) -> tuple[float, float]:
         """(lag s, delay s) of candidate ``k``."""
@@ -322,8 +331,8 @@ class ResponseIdentifier:
             return None
         if self.active is not None and self.active >= self.n_bank:
             return self._joint(time_s)  # a joint model only ever gives way to a longer one
-        best = min(self.allowed, key=self.score.__getitem__)
         current = self.initial_index if self.active is None else self.active
+        best = min(self.allowed, key=self.score.__getitem__, default=current)
         ratio = ADOPT_RATIO if self.active is None else SWITCH_RATIO
         if best != current and self.score[best] < ratio * self.score[current]:
             self.active = best
@@ -371,7 +380,8 @@ class ResponseIdentifier:
         # 0.13 s and 0.85-0.9 1/s was decisive too); a still longer one may follow, decisively
         # better than that
         bar = LONGER_RATIO * fit.score[base]
-        j = next((i for i, x in enumerate(fit.score) if i > base and x < bar), base)
+        rejected = self.rejected
+        j = next((i for i, x in enumerate(fit.score) if i > base and x < bar and self.joint[i] not in rejected), base)
         if j == base:
             self._settle = None
             return None

@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 
 from pf_offboard.control.adaptive import DELAYS_S, LAGS_S, IdentifiedModel, ResponseIdentifier
 from pf_offboard.control.types import GRAVITY_M_S2, Compensation, VehicleModel
@@ -120,6 +121,37 @@ def overspeed_bounded(push: Vec, velocity: Vec, reference: Vec) -> Vec:
     return (push[0] - k * velocity[0], push[1] - k * velocity[1], push[2] - k * velocity[2])
 
 
+# The rollback guard (issue 24, safety): after an adoption the tracking is watched for GUARD_WATCH_S;
+# when the cross-track error's RMS (low-passed over GUARD_TIME_S) exceeds GUARD_RATIO x its
+# reference plus GUARD_MARGIN_M, the compensator goes back to the model it flew before the adoption
+# (GUARD_SLEW_FACTOR x the adoption's slew rates, for GUARD_SLEW_S) and the identifier never adopts
+# that candidate again. Reference: the lower of the RMS at the adoption and the lowest since (an
+# adoption during an approach is judged against the converged flight). Replayed on 33 real SITL
+# step logs (both autopilots, three held-out paths, 1.5 and 3 m/s, every output; 26 adoptions, and
+# a virtual one every 2 s), no flight came within 2.7 cm of firing it; a forced bad adoption
+# flies 17-44 cm RMS (docs/design-decisions.md, "Rollback guard"). The speed error is reported
+# beside it but does not fire it: an open path's stop at its end alone moved it 0.5 m/s.
+GUARD_TIME_S = 1.0
+GUARD_WATCH_S = 12.0
+GUARD_RATIO = 2.0
+GUARD_MARGIN_M = 0.06
+GUARD_SLEW_FACTOR = 5.0
+GUARD_SLEW_S = 2.0
+
+
+@dataclass(frozen=True)
+class RolledBack:
+    """What the rollback guard undid (controller's clock, s): the adopted model it rejected, when,
+    and the errors' RMS (low-passed) that fired it against their reference."""
+
+    rejected: IdentifiedModel
+    at_s: float
+    cross_track_rms_m: float
+    reference_cross_track_rms_m: float
+    speed_error_rms_m_s: float
+    reference_speed_error_rms_m_s: float
+
+
 class InnerLoopCompensator:
     """Stateful, I/O-free. Call :meth:`predict` with each fresh state sample, then :meth:`invert`
     with the law's acceleration; :meth:`invert` records the setpoint it returns as sent.
@@ -170,6 +202,15 @@ class InnerLoopCompensator:
         self._target: tuple[float, float] | None = None
         # what the identifier adopted last (its drag then; None: the model flown is the given one)
         self.identified: IdentifiedModel | None = None
+        # the rollback guard (GUARD_*): the watch after an adoption, the model restored, the last rollback
+        self._watch: tuple[float, float, float, tuple[float, float, Vec, Vec], IdentifiedModel | None, int, int,
+                           tuple[float, float] | None] | None = None  # fmt: skip
+        self._restore: tuple[float, float, Vec, Vec] | None = None
+        self._rollback_until_s = -math.inf
+        self.rolled_back: RolledBack | None = None
+        self._err_t: float | None = None
+        self._cross_ms = self._speed_ms = 0.0
+        self._ref_cross_ms = self._ref_speed_ms = 0.0
         longest = max(self.horizon_s, self.identifier.max_delay_s) if self.identifier is not None else self.horizon_s
         self._history_s = longest + MAX_GAP_S
         for name, value in (("speed_integral_rad_s", speed_integral_rad_s), ("offset_integral_rad_s", offset_integral_rad_s),
@@ -221,6 +262,9 @@ class InnerLoopCompensator:
         self.phi1_offset_m = 0.0
         if getattr(self, "identifier", None) is not None:
             self.identifier.reset()
+        self._err_t = None  # the guard's error level starts over; a watch ends (nothing to compare)
+        self._cross_ms = self._speed_ms = 0.0
+        self._watch = None
 
     def integral_offsets(self) -> tuple[float, float, float]:
         """(eta2_ref offset m/s, xi1 offset m, phi1 offset m) the law adds to its inputs."""
@@ -312,16 +356,71 @@ class InnerLoopCompensator:
         """Score the candidate models and move the lag and dead time towards the best one at
         ADAPT_SLEW (s per s): the prediction horizon never jumps."""
         assert self.identifier is not None
-        best = self.identifier.update(time_s, velocity, self._pieces)
         ident = self.identifier
+        prev_active = ident.active
+        best = ident.update(time_s, velocity, self._pieces)
         if best is not None:
+            # the rollback guard watches what this adoption does, against the model flown until now
+            before = (self.lag[0], self.delay_s, self.gain, self.drag)
+            self._watch = (time_s, self._cross_ms, self._speed_ms, before, self.identified,
+                           -1 if prev_active is None else prev_active, -1 if ident.active is None else ident.active,
+                           self._target)  # fmt: skip
+            self._ref_cross_ms, self._ref_speed_ms = self._cross_ms, self._speed_ms
+            self._restore = None
             self._target = best
             z = ident.vertical
             self.identified = IdentifiedModel(best[0], best[1], ident.drag_1_s or 0.0, time_s, ident.gain_xy or 1.0,
                                               *(z if z is not None else (self.gain[2], self.drag[2])))  # fmt: skip
+        dt = time_s - t_prev
+        if time_s < self._rollback_until_s:  # rolling back: faster than an adoption
+            dt *= GUARD_SLEW_FACTOR
+        if self._restore is not None:  # rolled back to the initial model
+            lag, delay, gain, drag = self._restore
+            self._move_to_target(dt, (lag, delay), drag[0], gain[0], (gain[2], drag[2]))
+            return
         if self._target is None:
             return
-        self._move_to_target(time_s - t_prev, self._target, ident.drag_1_s, ident.gain_xy, ident.vertical)
+        self._move_to_target(dt, self._target, ident.drag_1_s, ident.gain_xy, ident.vertical)
+
+    def watch(self, time_s: float, cross_track_m: float, speed_error_m_s: float) -> None:
+        """The rollback guard's step (GUARD_*), with the measured cross-track error (m) and speed
+        error (m/s, reference minus along the path): low-pass their squares and, while an adoption
+        is watched, roll it back when the tracking has clearly degraded (:attr:`rolled_back`)."""
+        if self.identifier is None:
+            return
+        t_prev, self._err_t = self._err_t, time_s
+        if t_prev is None:
+            self._cross_ms, self._speed_ms = cross_track_m * cross_track_m, speed_error_m_s * speed_error_m_s
+            return
+        dt = time_s - t_prev
+        if not 0.0 < dt <= MAX_GAP_S:
+            return
+        c = dt / GUARD_TIME_S if dt < GUARD_TIME_S else 1.0
+        self._cross_ms += c * (cross_track_m * cross_track_m - self._cross_ms)
+        self._speed_ms += c * (speed_error_m_s * speed_error_m_s - self._speed_ms)
+        w = self._watch
+        if w is None:
+            return
+        if time_s - w[0] > GUARD_WATCH_S:
+            self._watch = None
+            return
+        if self._cross_ms < self._ref_cross_ms:
+            self._ref_cross_ms = self._cross_ms
+        if self._speed_ms < self._ref_speed_ms:
+            self._ref_speed_ms = self._speed_ms
+        cross, ref_cross = math.sqrt(self._cross_ms), math.sqrt(self._ref_cross_ms)
+        if cross <= GUARD_RATIO * ref_cross + GUARD_MARGIN_M:
+            return
+        _, _, _, before, identified, prev, cand, target = w
+        rejected = self.identified
+        assert rejected is not None
+        self.identifier.reject(cand, None if prev < 0 else prev)
+        # back to the model flown before: the initial one as it was, or the previous adoption
+        # (which the compensator follows again, as before this one)
+        self._restore = before if prev < 0 else None
+        self._target = (before[0], before[1]) if prev < 0 else target
+        self.identified, self._watch, self._rollback_until_s = identified, None, time_s + GUARD_SLEW_S
+        self.rolled_back = RolledBack(rejected, time_s, cross, ref_cross, math.sqrt(self._speed_ms), math.sqrt(self._ref_speed_ms))
 
     def _move_to_target(self, dt: float, target: tuple[float, float], drag: float | None, gain: float | None = None,
                         vertical: tuple[float, float] | None = None) -> None:  # fmt: skip

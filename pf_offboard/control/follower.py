@@ -646,6 +646,7 @@ class PathFollower:
             # integrate the measured errors only in the exact tube and while nothing saturates
             free = w == 0.0 and not (res.tangential or res.transversal or tilt or thrust_sat)
             comp.integrate(t_s, eta2_ref - st.eta2, st.xi1, st.phi1, free)
+            comp.watch(t_s, dist, eta2_ref - st.eta2)  # the rollback guard's errors (measured)
         return Command(
             acceleration=np.array((ax, ay, az)),
             thrust=thrust,

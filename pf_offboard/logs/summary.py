@@ -65,6 +65,22 @@ def identified_event(lag_s: float, delay_s: float, drag_1_s: float, gain_xy: flo
     return text
 
 
+ROLLED_BACK_PREFIX = "rolled_back: "
+
+
+def rolled_back_event(lag_s: float, delay_s: float, drag_1_s: float, gain_xy: float, cross_track_rms_m: float,
+                      reference_cross_track_rms_m: float, speed_error_rms_m_s: float,
+                      reference_speed_error_rms_m_s: float) -> str:  # fmt: skip
+    """The step log's event for an adoption the rollback guard undid (the rejected model, and the
+    errors' low-passed RMS that fired it against their reference); the model flown before it is
+    flown again (the summary's ``identified_model`` goes back to it)."""
+    values = (lag_s, delay_s, drag_1_s, gain_xy, cross_track_rms_m, reference_cross_track_rms_m, speed_error_rms_m_s,
+              reference_speed_error_rms_m_s)  # fmt: skip
+    keys = ("lag_s", "delay_s", "drag_1_s", "gain_xy", "cross_track_rms_m", "reference_cross_track_rms_m",
+            "speed_error_rms_m_s", "reference_speed_error_rms_m_s")  # fmt: skip
+    return ROLLED_BACK_PREFIX + " ".join(f"{k}={float(v):.4g}" for k, v in zip(keys, values))
+
+
 def parse_identified(event: str) -> dict[str, float] | None:
     """The model an ``identified: ...`` event names (None when the event is another one)."""
     if not event.startswith(IDENTIFIED_PREFIX):
@@ -202,6 +218,7 @@ class SummaryAccumulator:
         self._events: list[tuple[float, str]] = []
         self.events_dropped = 0
         self._identified: dict[str, float] | None = None
+        self._adoptions: list[dict[str, float]] = []  # in order; a rollback removes the last
         self._t_act: float | None = None
         self._conv = Convergence()
         self._settled = WindowSums(settled_window(settle_s), settle_s)
@@ -234,7 +251,12 @@ class SummaryAccumulator:
             for part in r.event.split(";"):
                 model = parse_identified(part)
                 if model is not None:
-                    self._identified = {**model, "adopted_at_s": t}
+                    self._adoptions.append({**model, "adopted_at_s": t})
+                elif part.startswith(ROLLED_BACK_PREFIX) and self._adoptions:
+                    self._adoptions.pop()
+                else:
+                    continue
+                self._identified = self._adoptions[-1] if self._adoptions else None
             if len(self._events) < MAX_EVENTS:
                 self._events.append((t, r.event))
             else:
