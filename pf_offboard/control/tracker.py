@@ -270,7 +270,10 @@ class TrajectoryTracker:
         jerk = ref.jerk_m_s3
         if comp is not None:
             # as in the path follower: the lag lead replaces the roll/pitch rate feed-forward
-            sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v_law)
+            # the drag inverted at the reference velocity, the deviation's share bounded, and no
+            # push beyond the reference speed (InnerLoopCompensator.invert): inverted at the
+            # velocity, a drag above the vehicle's is positive velocity feedback (a runaway)
+            sp = comp.invert(t_s, comp.lead((ax, ay, az), jerk), v_law, v_r)
             ax, ay, az = comp.commit(t_s, sp, self.law.thrust_set.clip)
         f = (ax, ay, az + G)
         thrust = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
@@ -301,6 +304,7 @@ class TrajectoryTracker:
                 e3[0] * em[0] + e3[1] * em[1] + e3[2] * em[2],
                 free,
             )
+            comp.watch(t_s, math.sqrt(em[0] * em[0] + em[1] * em[1] + em[2] * em[2]), speed_err)  # the rollback guard
         return Command(
             acceleration=np.array((ax, ay, az)),
             thrust=thrust,

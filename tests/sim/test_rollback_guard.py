@@ -18,41 +18,13 @@ import numpy as np
 import pytest
 
 import pf_offboard.control.compensator as compensator
-from pf_offboard.control.adaptive import ResponseIdentifier
 from pf_offboard.path import Projector
 from pf_offboard.sim import SimSpec
 
+from .helpers import FORCED_DELAY_S, force_adoption
 from .truth import fly_truth, truth_metrics
 
 PATH = Path(__file__).resolve().parents[1] / "real_sitl" / "configs" / "figure8-tilted.yaml"
-FORCED_AFTER_S = 3.0
-FORCED_DELAY_S = 0.25  # the joint candidate forced in: the px4-sih mock's dead time, about
-
-
-def force_adoption(monkeypatch: pytest.MonkeyPatch, gain: float, drag: float) -> None:
-    """Make the identifier adopt its joint candidate at FORCED_DELAY_S with ``gain`` and ``drag``
-    FORCED_AFTER_S after its first step, once (unless the guard rejected it)."""
-    update, fit = ResponseIdentifier.update, ResponseIdentifier.fit
-
-    def forced(self: ResponseIdentifier) -> int:
-        return next(k for k in self.joint if abs(self.candidate(k)[1] - FORCED_DELAY_S) < 1e-9)
-
-    def _update(self: ResponseIdentifier, time_s: float, velocity: Any, pieces: Any) -> Any:
-        out = update(self, time_s, velocity, pieces)
-        t0 = self.__dict__.setdefault("_forced_t0", time_s)
-        k = forced(self)
-        if time_s - t0 > FORCED_AFTER_S and not self.__dict__.get("_forced") and k not in self.rejected:
-            self.__dict__["_forced"] = True
-            self.active = k
-            return self.candidate(k)
-        return out
-
-    def _fit(self: ResponseIdentifier, k: int) -> tuple[float, float, float, float]:
-        lag, delay, g, c = fit(self, k)
-        return (lag, delay, gain, drag) if k == forced(self) else (lag, delay, g, c)
-
-    monkeypatch.setattr(ResponseIdentifier, "update", _update)
-    monkeypatch.setattr(ResponseIdentifier, "fit", _fit)
 
 
 def fly(tmp_path: Path) -> tuple[Any, Any]:

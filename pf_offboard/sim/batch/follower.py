@@ -18,6 +18,12 @@ from numpy.typing import NDArray
 
 from pf_offboard.control import follower as F
 from pf_offboard.control.compensator import (
+    GUARD_MARGIN_M,
+    GUARD_RATIO,
+    GUARD_SLEW_FACTOR,
+    GUARD_SLEW_S,
+    GUARD_TIME_S,
+    GUARD_WATCH_S,
     ADAPT_DRAG_SLEW,
     ADAPT_GAIN_SLEW,
     ADAPT_SLEW,
@@ -208,6 +214,21 @@ class _Compensator:
             m = c.identified
             known = (math.nan,) * 7 if m is None else (m.lag_s, m.delay_s, m.drag_1_s, m.adopted_at_s, m.gain_xy, m.gain_z, m.drag_z_1_s)
             self._identified = tuple(full(x) for x in known)  # what was adopted last, per flight
+            # the rollback guard (InnerLoopCompensator.watch), per flight: the watch after an
+            # adoption (its start, the reference RMS, the model flown before, the candidates), the
+            # initial model restored, the last rollback
+            nan, z = full(math.nan), np.zeros(n, dtype=bool)
+            if c._watch is not None or c._restore is not None or c.rolled_back is not None:
+                raise NotImplementedError("the batch engine starts from a compensator the guard has not acted on")
+            self._w_on, self._w_t0, self._w_ref_c, self._w_ref_s = z, nan, nan, nan
+            self._w_before: tuple[Arr, ...] = (nan,) * 8  # lag, delay, gain x/y/z, drag x/y/z
+            self._w_ident = tuple(full(x) for x in known)
+            self._w_prev = self._w_cand = np.full(n, -1, dtype=np.int64)
+            self._w_target = (nan, nan)
+            self._restoring = z
+            self._r: tuple[Arr, ...] = (nan,) * 8
+            self._rollback_until = full(-math.inf)
+            self._rb: tuple[Arr, ...] = (nan,) * 8  # at_s, rejected delay/gain/drag/adopted_at, cross, reference, speed
         self.reset()
 
     def reset(self) -> None:
@@ -223,6 +244,9 @@ class _Compensator:
         self.phi1_offset_m = z
         if self.identifier is not None:
             self.identifier.reset()
+            self._err_t: float | None = None
+            self._cross_ms, self._speed_ms = z, z
+            self._w_on = np.zeros(self.n, dtype=bool)
 
     def integral_offsets(self) -> tuple[Arr, Arr, Arr]:
         return self.speed_offset_m_s, self.xi1_offset_m, self.phi1_offset_m
@@ -354,9 +378,20 @@ class _Compensator:
     def _adapt(self, t_prev: float, time_s: float, velocity: V) -> None:
         """``InnerLoopCompensator._adapt`` per flight."""
         assert self.identifier is not None
+        prev_active = self.identifier.active
         found = self.identifier.update(time_s, velocity, self._pieces)  # type: ignore[arg-type]
         if found is not None:
             adopt, lag, delay = found
+            if adopt.any():  # the guard watches each adoption against the model flown until now
+                w = lambda new, old: np.where(adopt, new, old)  # noqa: E731
+                self._w_on, self._w_t0 = self._w_on | adopt, w(time_s, self._w_t0)
+                self._w_ref_c, self._w_ref_s = w(self._cross_ms, self._w_ref_c), w(self._speed_ms, self._w_ref_s)
+                now = (self.lag[0], self.horizon_s, *self.gain, *self.drag)
+                self._w_before = tuple(w(x, old) for x, old in zip(now, self._w_before))
+                self._w_ident = tuple(w(x, old) for x, old in zip(self._identified, self._w_ident))
+                self._w_prev, self._w_cand = w(prev_active, self._w_prev), w(self.identifier.active, self._w_cand)
+                self._w_target = (w(self._target[0], self._w_target[0]), w(self._target[1], self._w_target[1]))
+                self._restoring = self._restoring & ~adopt
             self._target = (np.where(adopt, lag, self._target[0]), np.where(adopt, delay, self._target[1]))
             if adopt.any():
                 gain = self.identifier.gain_xy
@@ -364,12 +399,69 @@ class _Compensator:
                 new = (lag, delay, self.identifier.drag_1_s, np.full(self.n, time_s), np.where(np.isnan(gain), 1.0, gain),
                        np.where(np.isnan(gz), self.gain[2], gz), np.where(np.isnan(cz), self.drag[2], cz))  # fmt: skip
                 self._identified = tuple(np.where(adopt, x, old) for x, old in zip(new, self._identified))
-        rows = ~np.isnan(self._target[0])
+        dt = time_s - t_prev
+        dtv = np.where(time_s < self._rollback_until, dt * GUARD_SLEW_FACTOR, dt)
+        rows = ~np.isnan(self._target[0]) & ~self._restoring
         if rows.any():
             ident = self.identifier
-            self._move_to_target(time_s - t_prev, rows, self._target, ident.drag_1_s, ident.gain_xy, ident.vertical)
+            self._move_to_target(dtv, rows, self._target, ident.drag_1_s, ident.gain_xy, ident.vertical)  # type: ignore[arg-type]
+        if self._restoring.any():  # rolled back to the initial model
+            r = self._r
+            self._move_to_target(dtv, self._restoring, (r[0], r[1]), r[5], r[2], (r[4], r[7]))  # type: ignore[arg-type]
 
-    def _move_to_target(self, dt: float, rows: Mask, target: tuple[Arr, Arr], drag: Arr, gain: Arr,
+    def watch(self, time_s: float, cross_track_m: Arr, speed_error_m_s: Arr) -> None:
+        """``InnerLoopCompensator.watch`` per flight."""
+        if self.identifier is None:
+            return
+        t_prev, self._err_t = self._err_t, time_s
+        if t_prev is None:
+            self._cross_ms, self._speed_ms = cross_track_m * cross_track_m, speed_error_m_s * speed_error_m_s
+            return
+        dt = time_s - t_prev
+        if not 0.0 < dt <= MAX_GAP_S:
+            return
+        c = dt / GUARD_TIME_S if dt < GUARD_TIME_S else 1.0
+        self._cross_ms = self._cross_ms + c * (cross_track_m * cross_track_m - self._cross_ms)
+        self._speed_ms = self._speed_ms + c * (speed_error_m_s * speed_error_m_s - self._speed_ms)
+        on = self._w_on & ~(time_s - self._w_t0 > GUARD_WATCH_S)
+        self._w_on = on
+        if not on.any():
+            return
+        self._w_ref_c = np.where(on & (self._cross_ms < self._w_ref_c), self._cross_ms, self._w_ref_c)
+        self._w_ref_s = np.where(on & (self._speed_ms < self._w_ref_s), self._speed_ms, self._w_ref_s)
+        cross, ref = np.sqrt(self._cross_ms), np.sqrt(np.where(on, self._w_ref_c, 0.0))
+        fire = on & ~(cross <= GUARD_RATIO * ref + GUARD_MARGIN_M)
+        if not fire.any():
+            return
+        assert self.identifier is not None
+        for i in np.flatnonzero(fire):
+            prev = int(self._w_prev[i])
+            self.identifier.flights[i].reject(int(self._w_cand[i]), None if prev < 0 else prev)
+        m = self._identified
+        f = lambda new, old: np.where(fire, new, old)  # noqa: E731
+        rb = (np.full(self.n, time_s), m[1], m[4], m[2], m[3], cross, ref, np.sqrt(self._speed_ms))
+        self._rb = tuple(f(x, old) for x, old in zip(rb, self._rb))
+        initial = fire & (self._w_prev < 0)
+        self._restoring = self._restoring | initial
+        self._r = tuple(np.where(initial, b, r) for b, r in zip(self._w_before, self._r))
+        b = self._w_before
+        self._target = (f(np.where(initial, b[0], self._w_target[0]), self._target[0]),
+                        f(np.where(initial, b[1], self._w_target[1]), self._target[1]))  # fmt: skip
+        self._identified = tuple(f(x, old) for x, old in zip(self._w_ident, self._identified))
+        self._rollback_until = f(time_s + GUARD_SLEW_S, self._rollback_until)
+        self._w_on = on & ~fire
+
+    def rolled_back(self) -> dict[str, Arr] | None:
+        """``InnerLoopCompensator.rolled_back`` per flight (NaN where the guard never fired): when,
+        the rejected model's dead time, gain, drag and adoption time, the low-passed cross-track
+        RMS that fired it, its reference, the speed error's RMS then."""
+        if self.identifier is None:
+            return None
+        keys = ("at_s", "delay_s", "gain_xy", "drag_1_s", "adopted_at_s", "cross_track_rms_m", "reference_cross_track_rms_m",
+                "speed_error_rms_m_s")  # fmt: skip
+        return dict(zip(keys, self._rb))
+
+    def _move_to_target(self, dt: float | Arr, rows: Mask, target: tuple[Arr, Arr], drag: Arr, gain: Arr,
                         vertical: tuple[Arr, Arr]) -> None:  # fmt: skip
         """``InnerLoopCompensator._move_to_target`` for the flights ``rows`` (drag, gain, vertical
         NaN: none)."""
@@ -736,6 +828,7 @@ class BatchFollower:
                 st = mt._replace(eta2=_blended_speed(mt.eta2, w_m, (t_m[0] / n_t, t_m[1] / n_t, t_m[2] / n_t), v_meas))
                 free = (w == 0.0) & ~(res.tangential | res.transversal | tilt | thrust_sat)
                 comp.integrate(t_s, eta2_ref - st.eta2, st.xi1, st.phi1, free)
+                comp.watch(t_s, dist, eta2_ref - st.eta2)
             a = np.fmod(psi + math.pi, 2.0 * math.pi)
             yaw = np.where(a <= 0.0, a + 2.0 * math.pi, a) - math.pi  # frames.wrap_pi
         return BatchCommand(
