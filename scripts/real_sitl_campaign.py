@@ -356,6 +356,8 @@ FAST_STARTS: tuple[dict[str, float], ...] = (
     {"north_m": 30.0, "east_m": 0.0, "speed_m_s": 2.0, "delay_s": 0.0},
     {"north_m": -20.0, "east_m": 20.0, "speed_m_s": 2.5, "delay_s": 0.0},
     {"north_m": 0.0, "east_m": -30.0, "speed_m_s": 3.0, "delay_s": 0.0},
+    {"north_m": -30.0, "east_m": 0.0, "speed_m_s": 3.0, "delay_s": 0.0},
+    {"north_m": 20.0, "east_m": 20.0, "speed_m_s": 2.5, "delay_s": 0.0},
 )
 # a fast start ends metres outside the default fence (the path's box grown by 2 m) and farther
 # from the path than the default limits (3 m): the user who flies one sets them
