@@ -122,8 +122,8 @@ def overspeed_bounded(push: Vec, velocity: Vec, reference: Vec) -> Vec:
 
 
 # The rollback guard (issue 24, safety): after an adoption the tracking is watched for GUARD_WATCH_S;
-# when the cross-track error's RMS (low-passed over GUARD_TIME_S) exceeds GUARD_RATIO x its
-# reference plus GUARD_MARGIN_M, the compensator goes back to the model it flew before the adoption
+# when the cross-track error's RMS (low-passed over GUARD_TIME_S) exceeds GUARD_RATIO x a reference
+# plus GUARD_MARGIN_M, the compensator goes back to the model it flew before the adoption
 # (GUARD_SLEW_FACTOR x the adoption's slew rates, for GUARD_SLEW_S) and the identifier never adopts
 # that candidate again. Reference: the lower of the RMS at the adoption and the lowest since (an
 # adoption during an approach is judged against the converged flight). Replayed on 33 real SITL
@@ -132,7 +132,8 @@ def overspeed_bounded(push: Vec, velocity: Vec, reference: Vec) -> Vec:
 # flies 17-44 cm RMS (docs/design-decisions.md, "Rollback guard"). The speed error is reported
 # beside it but does not fire it: an open path's stop at its end alone moved it 0.5 m/s.
 GUARD_TIME_S = 1.0
-GUARD_WATCH_S = 12.0
+GUARD_REFERENCE_TIME_S = 4.0  # the reference's low-pass: a flight's own ups and downs (turns) are in it
+GUARD_WATCH_S = 6.0
 GUARD_RATIO = 2.0
 GUARD_MARGIN_M = 0.06
 GUARD_SLEW_FACTOR = 5.0
@@ -209,7 +210,7 @@ class InnerLoopCompensator:
         self._rollback_until_s = -math.inf
         self.rolled_back: RolledBack | None = None
         self._err_t: float | None = None
-        self._cross_ms = self._speed_ms = 0.0
+        self._cross_ms = self._speed_ms = self._slow_cross_ms = self._slow_speed_ms = 0.0
         self._ref_cross_ms = self._ref_speed_ms = 0.0
         longest = max(self.horizon_s, self.identifier.max_delay_s) if self.identifier is not None else self.horizon_s
         self._history_s = longest + MAX_GAP_S
@@ -263,7 +264,7 @@ class InnerLoopCompensator:
         if getattr(self, "identifier", None) is not None:
             self.identifier.reset()
         self._err_t = None  # the guard's error level starts over; a watch ends (nothing to compare)
-        self._cross_ms = self._speed_ms = 0.0
+        self._cross_ms = self._speed_ms = self._slow_cross_ms = self._slow_speed_ms = 0.0
         self._watch = None
 
     def integral_offsets(self) -> tuple[float, float, float]:
@@ -362,10 +363,10 @@ class InnerLoopCompensator:
         if best is not None:
             # the rollback guard watches what this adoption does, against the model flown until now
             before = (self.lag[0], self.delay_s, self.gain, self.drag)
-            self._watch = (time_s, self._cross_ms, self._speed_ms, before, self.identified,
+            self._watch = (time_s, self._slow_cross_ms, self._slow_speed_ms, before, self.identified,
                            -1 if prev_active is None else prev_active, -1 if ident.active is None else ident.active,
                            self._target)  # fmt: skip
-            self._ref_cross_ms, self._ref_speed_ms = self._cross_ms, self._speed_ms
+            self._ref_cross_ms, self._ref_speed_ms = self._slow_cross_ms, self._slow_speed_ms
             self._restore = None
             self._target = best
             z = ident.vertical
@@ -389,25 +390,30 @@ class InnerLoopCompensator:
         if self.identifier is None:
             return
         t_prev, self._err_t = self._err_t, time_s
+        e2, s2 = cross_track_m * cross_track_m, speed_error_m_s * speed_error_m_s
         if t_prev is None:
-            self._cross_ms, self._speed_ms = cross_track_m * cross_track_m, speed_error_m_s * speed_error_m_s
+            self._cross_ms = self._slow_cross_ms = e2
+            self._speed_ms = self._slow_speed_ms = s2
             return
         dt = time_s - t_prev
         if not 0.0 < dt <= MAX_GAP_S:
             return
         c = dt / GUARD_TIME_S if dt < GUARD_TIME_S else 1.0
-        self._cross_ms += c * (cross_track_m * cross_track_m - self._cross_ms)
-        self._speed_ms += c * (speed_error_m_s * speed_error_m_s - self._speed_ms)
+        self._cross_ms += c * (e2 - self._cross_ms)
+        self._speed_ms += c * (s2 - self._speed_ms)
+        c = dt / GUARD_REFERENCE_TIME_S if dt < GUARD_REFERENCE_TIME_S else 1.0
+        self._slow_cross_ms += c * (e2 - self._slow_cross_ms)
+        self._slow_speed_ms += c * (s2 - self._slow_speed_ms)
         w = self._watch
         if w is None:
             return
         if time_s - w[0] > GUARD_WATCH_S:
             self._watch = None
             return
-        if self._cross_ms < self._ref_cross_ms:
-            self._ref_cross_ms = self._cross_ms
-        if self._speed_ms < self._ref_speed_ms:
-            self._ref_speed_ms = self._speed_ms
+        if self._slow_cross_ms < self._ref_cross_ms:
+            self._ref_cross_ms = self._slow_cross_ms
+        if self._slow_speed_ms < self._ref_speed_ms:
+            self._ref_speed_ms = self._slow_speed_ms
         cross, ref_cross = math.sqrt(self._cross_ms), math.sqrt(self._ref_cross_ms)
         if cross <= GUARD_RATIO * ref_cross + GUARD_MARGIN_M:
             return

@@ -45,9 +45,9 @@ FORCED_AFTER_S = 3.0
 FORCED_DELAY_S = 0.25  # the joint candidate forced in
 
 
-def force_adoption(monkeypatch: Any, gain: float, drag: float) -> None:
+def force_adoption(monkeypatch: Any, gain: float, drag: float, after_s: float = FORCED_AFTER_S) -> None:
     """Make the identifier adopt its joint candidate at FORCED_DELAY_S with ``gain`` and ``drag``
-    FORCED_AFTER_S after its first step, once (unless the guard rejected it)."""
+    ``after_s`` after its first step, once (unless the guard rejected it)."""
     update, fit = ResponseIdentifier.update, ResponseIdentifier.fit
 
     def forced(self: ResponseIdentifier) -> int:
@@ -57,7 +57,7 @@ def force_adoption(monkeypatch: Any, gain: float, drag: float) -> None:
         out = update(self, time_s, velocity, pieces)
         t0 = self.__dict__.setdefault("_forced_t0", time_s)
         k = forced(self)
-        if time_s - t0 > FORCED_AFTER_S and not self.__dict__.get("_forced") and k not in self.rejected:
+        if time_s - t0 > after_s and not self.__dict__.get("_forced") and k not in self.rejected:
             self.__dict__["_forced"] = True
             self.active = k
             return self.candidate(k)

@@ -20,6 +20,7 @@ from pf_offboard.control import follower as F
 from pf_offboard.control.compensator import (
     GUARD_MARGIN_M,
     GUARD_RATIO,
+    GUARD_REFERENCE_TIME_S,
     GUARD_SLEW_FACTOR,
     GUARD_SLEW_S,
     GUARD_TIME_S,
@@ -245,7 +246,7 @@ class _Compensator:
         if self.identifier is not None:
             self.identifier.reset()
             self._err_t: float | None = None
-            self._cross_ms, self._speed_ms = z, z
+            self._cross_ms, self._speed_ms, self._slow_cross_ms, self._slow_speed_ms = z, z, z, z
             self._w_on = np.zeros(self.n, dtype=bool)
 
     def integral_offsets(self) -> tuple[Arr, Arr, Arr]:
@@ -385,7 +386,7 @@ class _Compensator:
             if adopt.any():  # the guard watches each adoption against the model flown until now
                 w = lambda new, old: np.where(adopt, new, old)  # noqa: E731
                 self._w_on, self._w_t0 = self._w_on | adopt, w(time_s, self._w_t0)
-                self._w_ref_c, self._w_ref_s = w(self._cross_ms, self._w_ref_c), w(self._speed_ms, self._w_ref_s)
+                self._w_ref_c, self._w_ref_s = w(self._slow_cross_ms, self._w_ref_c), w(self._slow_speed_ms, self._w_ref_s)
                 now = (self.lag[0], self.horizon_s, *self.gain, *self.drag)
                 self._w_before = tuple(w(x, old) for x, old in zip(now, self._w_before))
                 self._w_ident = tuple(w(x, old) for x, old in zip(self._identified, self._w_ident))
@@ -414,21 +415,26 @@ class _Compensator:
         if self.identifier is None:
             return
         t_prev, self._err_t = self._err_t, time_s
+        e2, s2 = cross_track_m * cross_track_m, speed_error_m_s * speed_error_m_s
         if t_prev is None:
-            self._cross_ms, self._speed_ms = cross_track_m * cross_track_m, speed_error_m_s * speed_error_m_s
+            self._cross_ms = self._slow_cross_ms = e2
+            self._speed_ms = self._slow_speed_ms = s2
             return
         dt = time_s - t_prev
         if not 0.0 < dt <= MAX_GAP_S:
             return
         c = dt / GUARD_TIME_S if dt < GUARD_TIME_S else 1.0
-        self._cross_ms = self._cross_ms + c * (cross_track_m * cross_track_m - self._cross_ms)
-        self._speed_ms = self._speed_ms + c * (speed_error_m_s * speed_error_m_s - self._speed_ms)
+        self._cross_ms = self._cross_ms + c * (e2 - self._cross_ms)
+        self._speed_ms = self._speed_ms + c * (s2 - self._speed_ms)
+        c = dt / GUARD_REFERENCE_TIME_S if dt < GUARD_REFERENCE_TIME_S else 1.0
+        self._slow_cross_ms = self._slow_cross_ms + c * (e2 - self._slow_cross_ms)
+        self._slow_speed_ms = self._slow_speed_ms + c * (s2 - self._slow_speed_ms)
         on = self._w_on & ~(time_s - self._w_t0 > GUARD_WATCH_S)
         self._w_on = on
         if not on.any():
             return
-        self._w_ref_c = np.where(on & (self._cross_ms < self._w_ref_c), self._cross_ms, self._w_ref_c)
-        self._w_ref_s = np.where(on & (self._speed_ms < self._w_ref_s), self._speed_ms, self._w_ref_s)
+        self._w_ref_c = np.where(on & (self._slow_cross_ms < self._w_ref_c), self._slow_cross_ms, self._w_ref_c)
+        self._w_ref_s = np.where(on & (self._slow_speed_ms < self._w_ref_s), self._slow_speed_ms, self._w_ref_s)
         cross, ref = np.sqrt(self._cross_ms), np.sqrt(np.where(on, self._w_ref_c, 0.0))
         fire = on & ~(cross <= GUARD_RATIO * ref + GUARD_MARGIN_M)
         if not fire.any():
