@@ -18,7 +18,7 @@ from pf_offboard.sim.batch.flight import fly, plan_chunks, supported
 from pf_offboard.sweep import plan
 from pf_offboard.sweep.runner import FlightSettings, execute, rows_equal
 
-from ..helpers import PX4_SIH, ROOT, force_adoption
+from ..helpers import PX4_SIH, ROOT
 
 PAPER = ROOT / "configs" / "paper.yaml"
 
@@ -129,34 +129,3 @@ def test_a_rates_flight_on_arducopter_that_adopts_a_longer_lag_follows_the_scala
     for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s"):
         assert abs(getattr(model, key) - float(found[key][0])) <= 1e-9, key
 
-
-@pytest.mark.parametrize(("output", "flights"), [(None, 1), ("attitude", 1)])
-def test_a_rolled_back_adoption_follows_the_scalar_flight(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, output: str | None,
-                                                          flights: int, scalar_flight) -> None:  # fmt: skip
-    """The rollback guard in the batch engine: a bad adoption forced in (tests/sim/helpers.force_adoption)
-    is rolled back at the same instant, to the same model, along the same trajectory as the scalar flight's."""
-    force_adoption(monkeypatch, 0.5, 3.0)
-    settings = FlightSettings(vehicle="px4-default", duration_s=10.0, settle_s=3.0, output_mode=output)
-    tasks = plan.tasks(_identifying_config(tmp_path), plan.SweepSpec(flights=flights, seed=3, settings=settings))
-    assert all(supported(t) is None for t in tasks)
-    trace: list[np.ndarray] = []
-    followers: list = []
-    rows, redo = fly(tasks, trace, followers)
-    assert not redo
-    batch = np.array(trace)
-    found, rolled = followers[0].compensator.identified(), followers[0].compensator.rolled_back()
-    for k, task in enumerate(tasks):
-        scalar_followers: list = []
-        scalar, row = scalar_flight(task, scalar_followers)
-        worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
-        assert worst <= 1e-6, (k, worst)
-        assert rows_equal([rows[task.key]], [row])
-        comp = scalar_followers[0].compensator
-        rb = comp.rolled_back
-        assert rb is not None and rb.rejected.gain_xy == 0.5  # the guard fired
-        assert abs(rb.at_s - float(rolled["at_s"][k])) <= 1e-9 and float(rolled["gain_xy"][k]) == 0.5
-        model = comp.identified
-        assert (model is None) == np.isnan(found["adopted_at_s"][k])
-        if model is not None:
-            for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s", "gain_xy"):
-                assert abs(getattr(model, key) - float(found[key][k])) <= 1e-9, key

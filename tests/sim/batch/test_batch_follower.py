@@ -105,3 +105,48 @@ def test_identifying_followers_equal_the_scalar_ones_adoption_by_adoption() -> N
         else:
             for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s", "gain_xy"):
                 assert abs(getattr(m, key) - float(found[key][i])) <= 1e-9, (i, key)
+
+
+def test_rollbacks_equal_the_scalar_ones(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The rollback guard (compensator.GUARD_*) per flight: made touchy here (fires when the 1 s RMS
+    exceeds half its reference) so that, on these random states, some flights roll adoptions back
+    at different instants, some to the typical model; outputs, models and rollbacks agree."""
+    import pf_offboard.control.compensator as compensator
+    import pf_offboard.sim.batch.follower as batch_follower
+
+    for module in (compensator, batch_follower):
+        monkeypatch.setattr(module, "GUARD_RATIO", 0.5)
+        monkeypatch.setattr(module, "GUARD_MARGIN_M", 0.0)
+    cfg = load_config(CONFIGS / "figure8.yaml")
+    cfg = dataclasses.replace(cfg, compensation=dataclasses.replace(cfg.compensation, identify_online=True))
+    n, steps, dt = 16, 700, 0.01
+    rng = np.random.default_rng(5)
+    proto = PathFollower.from_config(cfg)
+    scalar = [copy.deepcopy(proto) for _ in range(n)]
+    batch = BatchFollower(copy.deepcopy(proto), n)
+    pos, vel = _states(scalar[0].path, n, rng)
+    pos, vel = 0.05 * pos + 0.95 * np.array([scalar[0].path.eval(0.0).sigma] * n), 0.3 * vel  # nearer the path
+    worst = 0.0
+    for k in range(steps):
+        t = dt * k
+        cb = batch.update(pos, vel, t)
+        for i, f in enumerate(scalar):
+            c = f.update(pos[i], vel[i], t)
+            for a, b in ((c.acceleration, cb.acceleration[i]), (c.attitude, cb.attitude[i])):
+                worst = max(worst, float(np.max(np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float)))))
+        pos = pos + dt * vel
+        vel = vel + dt * cb.acceleration + rng.normal(0.0, 0.05, vel.shape)
+    assert worst <= 1e-9, worst
+    rolled, found = batch.compensator.rolled_back(), batch.compensator.identified()  # type: ignore[union-attr]
+    fired = [f.compensator.rolled_back for f in scalar]
+    assert 0 < sum(r is not None for r in fired) < n, [r is not None for r in fired]
+    for i, (f, r) in enumerate(zip(scalar, fired)):
+        if r is None:
+            assert np.isnan(rolled["at_s"][i])
+        else:
+            assert abs(r.at_s - rolled["at_s"][i]) <= 1e-9 and abs(r.rejected.delay_s - rolled["delay_s"][i]) <= 1e-9
+            assert abs(r.cross_track_rms_m - rolled["cross_track_rms_m"][i]) <= 1e-9
+        m = f.compensator.identified
+        assert (m is None) == np.isnan(found["adopted_at_s"][i])
+        if m is not None:
+            assert abs(m.delay_s - found["delay_s"][i]) <= 1e-9 and abs(m.adopted_at_s - found["adopted_at_s"][i]) <= 1e-9
