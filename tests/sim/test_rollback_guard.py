@@ -42,10 +42,10 @@ def cross_track_m(f: Any) -> np.ndarray:
 
 
 # (gain, drag 1/s) forced in with a 0.25 s dead time (the vehicle answers after ~0.04 s); measured
-# on the px4-default mock, tilted figure-eight, 1.5 m/s, attitude output, from the mock's truth,
-# cross-track RMS from activation + 8 s without / with the guard (cm), max from the adoption with:
-# 0.5, 3: 17.9 / 1.1, 36.7 (fired 2.8 s after the adoption); 1.5, 0: 44.1 / 1.0, 19.1 (2.0 s);
-# 1.5, 3: 19.1 / 1.8, 30.8 (3.2 s); 0.5, 1: 22.7 / 0.9, 37.8 (2.8 s). Unforced: 0.7 cm, never fires
+# on the px4-default mock, tilted figure-eight, 1.5 m/s, attitude output, from the mock's truth:
+# cross-track RMS from activation + 8 s without / with the guard (cm), max from the adoption with
+# it (cm), when it fired after the adoption: 0.5, 3: 17.9 / 1.1, 36.5, 2.8 s; 1.5, 0: 44.1 / 1.0,
+# 19.1, 1.9 s; 1.5, 3: 19.1 / 1.7, 30.6, 3.1 s; 0.5, 1: 22.7 / 0.9, 37.5, 2.8 s. Unforced: 0.7 cm
 CASES = [(0.5, 3.0), (1.5, 0.0), (1.5, 3.0), (0.5, 1.0)]
 
 
