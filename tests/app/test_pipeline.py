@@ -146,3 +146,37 @@ def test_the_rates_output_is_the_cores_default_and_starts_over_at_activation(pro
     # without an inner-loop model (no compensation) there is no lag to answer with: the law alone
     bare = PathFollower(Path.from_waypoints([(0, 0, 2), (2, 0, 2), (2, 2, 2)]), 1.0, compensation=Compensation.off())
     assert Pipeline(bare, Encoder("rates", PX4, 1, 1, hover_thrust=0.5)).encoder.rates_output.reference_lag_s is None
+
+
+def test_an_adoption_and_its_rollback_are_logged_once_each() -> None:
+    """The compensator's ``identified`` (an adoption) and ``rolled_back`` (the guard undid it):
+    one ``identified: ...`` event, then one ``rolled_back: ...``; the model restored (none here) is
+    not logged as an adoption."""
+    from types import SimpleNamespace
+
+    from pf_offboard.control.adaptive import IdentifiedModel
+    from pf_offboard.control.compensator import RolledBack
+
+    bad = IdentifiedModel(0.1, 0.25, 3.0, 0.02, gain_xy=0.5, gain_z=0.5, drag_z_1_s=3.0)
+
+    class Timed(FakeFollower):
+        compensator = SimpleNamespace(identified=None, rolled_back=None)
+
+        def update(self, position, velocity, time_s=None):  # type: ignore[no-untyped-def]
+            comp = self.compensator
+            if self.calls == 5:
+                comp.identified = bad
+            if self.calls == 10:
+                comp.identified, comp.rolled_back = None, RolledBack(bad, time_s, 0.11, 0.024, 0.4, 0.06)
+            return super().update(position, velocity)
+
+    pipe = Pipeline(Timed(), Encoder("attitude", PX4, 1, 1, hover_thrust=0.5))
+    events = []
+    for msg in telemetry():
+        pipe.on_message(msg)
+        step = pipe.step()
+        if step is not None and step.record.event:
+            events.append(step.record.event)
+    assert sum(e.count("identified: ") for e in events) == 1
+    rolled = [e for e in events if e.startswith("rolled_back: ")]
+    assert len(rolled) == 1 and "delay_s=0.25" in rolled[0] and "gain_xy=0.5" in rolled[0] and "reference_cross_track_rms_m=0.024" in rolled[0]

@@ -152,3 +152,20 @@ def test_the_last_identified_model_is_the_summarys() -> None:
     assert s.to_dict()["identified_model"] == s.identified_model
     line = next(x for x in s.lines() if x.startswith("identified model"))
     assert "dead time 0.000 s" in line and "drag 0.312 1/s" in line and f"t={recs[250].time_s:.3f} s" in line
+
+
+def test_a_rolled_back_adoption_no_longer_counts() -> None:
+    """``rolled_back: ...`` (the rollback guard undid the last adoption): the summary's model is the
+    one adopted before it again, or none."""
+    from pf_offboard.logs.summary import ROLLED_BACK_PREFIX, identified_event, rolled_back_event
+
+    event = rolled_back_event(0.1, 0.25, 3.0, 0.5, 0.11, 0.024, 0.4, 0.06)
+    assert event.startswith(ROLLED_BACK_PREFIX) and "gain_xy=0.5" in event and "cross_track_rms_m=0.11" in event
+    recs = [record(0.02 * k, 0.01, -1.5) for k in range(400)]
+    recs[100] = dataclasses.replace(recs[100], event=identified_event(0.1, 0.04, 0.25))
+    recs[200] = dataclasses.replace(recs[200], event=identified_event(0.1, 0.25, 3.0, gain_xy=0.5))
+    recs[300] = dataclasses.replace(recs[300], event=event)
+    s = summarize(recs)
+    assert s.identified_model == {"lag_s": 0.1, "delay_s": 0.04, "drag_1_s": 0.25, "adopted_at_s": recs[100].time_s}
+    alone = summarize([dataclasses.replace(r, event="") if i == 100 else r for i, r in enumerate(recs)])
+    assert alone.identified_model is None
