@@ -128,4 +128,3 @@ def test_a_rates_flight_on_arducopter_that_adopts_a_longer_lag_follows_the_scala
     assert model is not None and model.lag_s == 0.15 and 0.06 <= model.delay_s <= 0.08
     for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s"):
         assert abs(getattr(model, key) - float(found[key][0])) <= 1e-9, key
-
