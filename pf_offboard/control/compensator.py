@@ -160,7 +160,9 @@ class InnerLoopCompensator:
     with the law's acceleration; :meth:`invert` records the setpoint it returns as sent.
     ``adapt``: identify a shorter dead time and the horizontal drag in flight
     (:class:`~pf_offboard.control.adaptive.ResponseIdentifier`; the follower turns it on with
-    ``Compensation.identify_online`` and the typical model)."""
+    ``Compensation.identify_online`` and the typical model); then :meth:`watch` with each step's
+    measured errors lets the rollback guard undo an adoption that flies clearly worse
+    (:attr:`rolled_back`, GUARD_*)."""
 
     def __init__(
         self,
