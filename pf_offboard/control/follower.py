@@ -643,12 +643,8 @@ class PathFollower:
             n_t = math.sqrt(t_m[0] * t_m[0] + t_m[1] * t_m[1] + t_m[2] * t_m[2])
             w_m = min(_approach_weight(mt.tube, dist), 1.0)
             st = mt.state._replace(eta2=_blended_speed(mt.state.eta2, w_m, (t_m[0] / n_t, t_m[1] / n_t, t_m[2] / n_t), v_meas))
-            # integrate the measured errors only in the exact tube, while nothing saturates and once
-            # the start ramp has handed over: the vehicle catching up with the ramp is a transient,
-            # not a steady mismatch (integrated, it wound the speed offset up to +0.11 m/s in 0.6 s
-            # and the vehicle overshot the speed after the ramp: real PX4 SIH's fast start engaged
-            # 1.3 m off, 1.68 m/s against 1.5, 13 cm off the path after first converging)
-            free = w == 0.0 and ramp.done and not (res.tangential or res.transversal or tilt or thrust_sat)
+            # integrate the measured errors only in the exact tube and while nothing saturates
+            free = w == 0.0 and not (res.tangential or res.transversal or tilt or thrust_sat)
             comp.integrate(t_s, eta2_ref - st.eta2, st.xi1, st.phi1, free)
             comp.watch(t_s, dist, eta2_ref - st.eta2)  # the rollback guard's errors (measured)
         return Command(

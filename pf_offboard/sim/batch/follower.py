@@ -833,8 +833,6 @@ class BatchFollower:
                 w_m = np.minimum(_approach_weight(mt.tube, dist), 1.0)
                 st = mt._replace(eta2=_blended_speed(mt.eta2, w_m, (t_m[0] / n_t, t_m[1] / n_t, t_m[2] / n_t), v_meas))
                 free = (w == 0.0) & ~(res.tangential | res.transversal | tilt | thrust_sat)
-                if ramp is not None:  # as the scalar: once the start ramp has handed over
-                    free = free & ramp.done
                 comp.integrate(t_s, eta2_ref - st.eta2, st.xi1, st.phi1, free)
                 comp.watch(t_s, dist, eta2_ref - st.eta2)
             a = np.fmod(psi + math.pi, 2.0 * math.pi)
