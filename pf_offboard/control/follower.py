@@ -24,7 +24,6 @@ from pf_offboard.control.feedforward import (
     quaternion_from_axes,
 )
 from pf_offboard.control.law import BISECTION_STEPS, ControlLaw, LawOutput
-from pf_offboard.control import profile as _profile
 from pf_offboard.control.profile import SpeedProfile, SpeedProfileSpec, replan_weight, vehicle_lap_time_bound
 from pf_offboard.control.transverse import ExactTerms, exact_terms
 from pf_offboard.control.tuning import gains_for_vehicle
@@ -327,14 +326,14 @@ class PathFollower:
         return identified is not None and identified.lag_s <= self.vehicle.accel_lag_xy_s + 1e-9
 
     def _identified_profile(self) -> SpeedProfile | None:
-        """The speed profile flown once the compensator's identifier adopts a model: the share of
-        the limits discounted for the identified model's unexplained response only
-        (:data:`~pf_offboard.control.profile.IDENTIFIED_RESPONSE_S`); None when nothing can be
-        identified or the plan would not change."""
+        """The speed profile flown once the compensator's identifier adopts a model with the
+        model's lag: its dead time is then predicted by the identified amount, so the share of the
+        limits is discounted for the lag only (``profile.py``, ``response_share``); None when
+        nothing can be identified or the plan would not change."""
         spec, comp = self._speed_profile_spec, self.compensator
         if spec is None or comp is None or getattr(comp, "identifier", None) is None:
             return None
-        response_s = _profile.IDENTIFIED_RESPONSE_S
+        response_s = max(self.vehicle.accel_lag_xy_s, self.vehicle.accel_lag_z_s)
         if response_s >= self._response_s:
             return None
         return SpeedProfile(self.path, spec, self.limits, self.speed, response_s)

@@ -266,8 +266,8 @@ def _fly_in_place(f: PathFollower, identified, seconds: float, eta1: float, dt: 
 
 def test_an_identified_response_replans_the_profile_without_a_step_in_the_reference() -> None:
     """The default controller (online identification) re-plans its speed profile once the
-    compensator adopts a model with the model's lag: the share of the limits is no longer
-    discounted for an unknown response (a shorter planned lap), blended in over REPLAN_BLEND_S
+    compensator adopts a model with the model's lag: the share of the limits is discounted for
+    the lag only, its dead time now predicted (a shorter planned lap), blended in over REPLAN_BLEND_S
     from the adoption: the reference speed moves there at most at the smoothstep's largest slope
     and never steps. A longer adopted lag (a slower loop) keeps the plan; so does a controller that
     identifies nothing."""
