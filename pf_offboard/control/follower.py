@@ -24,7 +24,7 @@ from pf_offboard.control.feedforward import (
     quaternion_from_axes,
 )
 from pf_offboard.control.law import BISECTION_STEPS, ControlLaw, LawOutput
-from pf_offboard.control.profile import SpeedProfile, SpeedProfileSpec, vehicle_lap_time_bound
+from pf_offboard.control.profile import SpeedProfile, SpeedProfileSpec, replan_weight, vehicle_lap_time_bound
 from pf_offboard.control.transverse import ExactTerms, exact_terms
 from pf_offboard.control.tuning import gains_for_vehicle
 from pf_offboard.control.types import (
@@ -292,6 +292,11 @@ class PathFollower:
         self.profile = (SpeedProfile(path, speed_profile, self.limits, speed, response_s)
                         if speed_profile is not None else None)  # fmt: skip
         self._speed_profile_spec, self._response_s = speed_profile, response_s
+        # re-planned for the identified response once the compensator adopts one (blended in from
+        # then: replan_weight); None without a profile or without online identification
+        self._replan_t0: float | None = None
+        self._replan_w = 0.0
+        self.identified_profile = self._identified_profile()
         self._yaw = YawProfile(self.yaw, path.length_m, path.closed, speed)
         self._closed = bool(path.closed)
         self._lam_max = float(path.lam_max)
@@ -312,6 +317,26 @@ class PathFollower:
         self.law = ControlLaw(self.gains, self.limits)
         if self._speed_profile_spec is not None:
             self.profile = SpeedProfile(self.path, self._speed_profile_spec, self.limits, self.speed, self._response_s)
+            self.identified_profile = self._identified_profile()
+
+    def _replans(self, identified: Any) -> bool:
+        """Whether an adopted model re-plans the speed profile: one with the model's lag (its dead
+        time, gain and drag identified). A longer lag (ArduPilot's ``rates`` output through its
+        attitude target, 0.15 s) is a slower loop: the profile planned for the model stays."""
+        return identified is not None and identified.lag_s <= self.vehicle.accel_lag_xy_s + 1e-9
+
+    def _identified_profile(self) -> SpeedProfile | None:
+        """The speed profile flown once the compensator's identifier adopts a model with the
+        model's lag: its dead time is then predicted by the identified amount, so the share of the
+        limits is discounted for the lag only (``profile.py``, ``response_share``); None when
+        nothing can be identified or the plan would not change."""
+        spec, comp = self._speed_profile_spec, self.compensator
+        if spec is None or comp is None or getattr(comp, "identifier", None) is None:
+            return None
+        response_s = max(self.vehicle.accel_lag_xy_s, self.vehicle.accel_lag_z_s)
+        if response_s >= self._response_s:
+            return None
+        return SpeedProfile(self.path, spec, self.limits, self.speed, response_s)
 
     @classmethod
     def paper(
@@ -400,6 +425,12 @@ class PathFollower:
         if self.profile is None:
             return self.reference_speed(eta1), 0.0, 0.0
         e, de, dde = self.profile.evaluate(eta1)
+        w = self._replan_w
+        if w > 0.0:
+            assert self.identified_profile is not None
+            e1, de1, dde1 = self.identified_profile.evaluate(eta1)
+            k = 1.0 - w
+            e, de, dde = k * e + w * e1, k * de + w * de1, k * dde + w * dde1
         if self._closed:
             return e, de, dde
         sign = 1.0 if self.speed > 0.0 else -1.0
@@ -575,6 +606,11 @@ class PathFollower:
             if not _finite(y, v):
                 comp.reset()
                 y, v = y_meas, v_meas
+            if self.identified_profile is not None and (self._replan_t0 is not None or self._replans(comp.identified)):
+                # the identified response's profile, blended in from its adoption
+                if self._replan_t0 is None:
+                    self._replan_t0 = t_s
+                self._replan_w = replan_weight(t_s - self._replan_t0)
         lam_meas: float | None = None
         if comp is not None:
             # the measured state's closest point first; the law's (at the prediction) is searched

@@ -69,6 +69,24 @@ RESPONSE_REFERENCE_S = 0.5
 # still exceeded. 0.5 keeps the planned speed non-decreasing in the jerk bound (0.7 did not at
 # accel_share 1) and leaves the defaults (10 m/s^3, 3 rad/s -> 14.7) unchanged.
 JERK_RATE_SHARE = 0.5
+# Once the compensator flies an identified model with the model's lag (its dead time predicted by
+# the identified amount, its gain and drag inverted: InnerLoopCompensator.identified), the share is
+# discounted for the lag only: the follower re-plans with response_share(accel_share, lag),
+# blended in over REPLAN_BLEND_S from the adoption (a smoothstep in time, no step in the reference
+# speed). Before an adoption the model's lag + delay discount it. Discounting nothing (the whole
+# accel_share) flew the mock px4-sih's tight held-out figure-eight 12.8 cm RMS / 59 cm max.
+REPLAN_BLEND_S = 2.0
+
+
+def replan_weight(elapsed_s: float) -> float:
+    """Weight (0..1) of the re-planned profile ``elapsed_s`` after the adoption: a smoothstep over
+    :data:`REPLAN_BLEND_S` (C1, largest slope 1.5 / REPLAN_BLEND_S per s)."""
+    x = elapsed_s / REPLAN_BLEND_S
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    return x * x * (3.0 - 2.0 * x)
 
 
 def response_share(accel_share: float, response_s: float) -> float:

@@ -248,3 +248,50 @@ def test_a_lower_tilt_limit_rebuilds_the_law_and_the_plan_and_a_higher_one_chang
     assert follower.profile is not None and profile is not None
     assert follower.profile.stats.max_tilt_deg <= 20.0 < profile.stats.max_tilt_deg
     assert follower.profile.stats.travel_time_s > profile.stats.travel_time_s
+
+
+def _fly_in_place(f: PathFollower, identified, seconds: float, eta1: float, dt: float = 0.02) -> list[float]:
+    """The reference speed at ``eta1`` after each step at one on-path state, sampled for ``seconds``
+    with ``identified`` adopted from t = 0."""
+    lam = 0.3 * f.path.lam_max
+    pt = f.path.eval(lam)
+    tangent = np.asarray(pt.d1) / np.linalg.norm(pt.d1)
+    f.compensator.identified = identified
+    out = []
+    for k in range(int(round(seconds / dt)) + 1):
+        f.update(pt.sigma, 2.0 * tangent, time_s=k * dt)
+        out.append(f.reference(eta1)[0])
+    return out
+
+
+def test_an_identified_response_replans_the_profile_without_a_step_in_the_reference() -> None:
+    """The default controller (online identification) re-plans its speed profile once the
+    compensator adopts a model with the model's lag: the share of the limits is discounted for
+    the lag only, its dead time now predicted (a shorter planned lap), blended in over REPLAN_BLEND_S
+    from the adoption: the reference speed moves there at most at the smoothstep's largest slope
+    and never steps. A longer adopted lag (a slower loop) keeps the plan; so does a controller that
+    identifies nothing."""
+    from pf_offboard.control.adaptive import IdentifiedModel
+    from pf_offboard.control.profile import REPLAN_BLEND_S
+
+    spec = SpeedProfileSpec(3.0)
+    f = _follower(PAPER_YAML, spec)
+    f = PathFollower(f.path, 1.5, speed_profile=spec)  # the defaults: typical model, identify_online
+    assert f.identified_profile is not None
+    before, after = f.profile.stats.travel_time_s, f.identified_profile.stats.travel_time_s
+    assert after < 0.97 * before and after >= point_mass_lap_time(f.path, spec, f.limits)
+    grid = np.linspace(0.0, f.path.length_m, 400)
+    eta1 = float(grid[np.argmax([abs(f.identified_profile.evaluate(x)[0]) - abs(f.profile.evaluate(x)[0]) for x in grid])])
+    v0, v1 = abs(f.profile.evaluate(eta1)[0]), abs(f.identified_profile.evaluate(eta1)[0])
+    assert v1 - v0 > 0.2
+    dt = 0.02
+    refs = np.abs(_fly_in_place(f, IdentifiedModel(0.1, 0.13, 0.9, 0.0, 0.95, 0.95, 0.9), REPLAN_BLEND_S + 1.0, eta1, dt))
+    steps = np.abs(np.diff(refs))
+    assert steps.max() <= 1.5 * dt / REPLAN_BLEND_S * abs(v1 - v0) * 1.05 + 1e-6, steps.max()
+    assert refs[0] == v0 and abs(refs[-1] - v1) < 1e-9 and np.all(np.diff(refs) >= 0.0), (refs[0], refs[-1], v0, v1)
+    # a slower adopted loop (lag 0.15 s) keeps the profile planned for the model
+    g = PathFollower(f.path, 1.5, speed_profile=spec)
+    kept = np.abs(_fly_in_place(g, IdentifiedModel(0.15, 0.06, 0.0, 0.0), 1.0, eta1, dt))
+    assert g._replan_w == 0.0 and abs(kept[-1] - v0) < 1e-3
+    # nothing to identify: nothing to re-plan
+    assert PathFollower(f.path, 1.5, speed_profile=spec, compensation=Compensation(identify_online=False)).identified_profile is None

@@ -34,6 +34,7 @@ from pf_offboard.control.compensator import (
     OVERSPEED_MARGIN_M_S,
     OFFSET_INTEGRAL_BAND_M,
 )
+from pf_offboard.control.profile import REPLAN_BLEND_S
 from pf_offboard.control.types import GRAVITY_M_S2
 from pf_offboard.sim.batch.adaptive import BatchIdentifier
 from pf_offboard.sim.batch.geometry import BatchPath, atan2, power
@@ -636,6 +637,12 @@ class BatchFollower:
         self.law = BatchLaw(follower.gains, follower.limits, laws)
         self.speed = follower.speed
         self.profile = _Profile(follower.profile) if follower.profile is not None else None
+        # the identified response's profile, blended in per flight from its adoption (the scalar's)
+        ident = getattr(follower, "identified_profile", None)
+        self.identified_profile = _Profile(ident) if ident is not None and self.profile is not None else None
+        t0 = getattr(follower, "_replan_t0", None)
+        self._replan_t0 = np.full(n, math.nan if t0 is None else float(t0))
+        self._replan_w = np.full(n, float(getattr(follower, "_replan_w", 0.0)))
         self.compensator = _Compensator(follower.compensator, n) if follower.compensator is not None else None
         self._measured_projector = BatchProjector(follower.path, n, self.bpath) if self.compensator is not None else None
         self._yaw = follower._yaw
@@ -678,6 +685,11 @@ class BatchFollower:
             stop = law.stopping_speed(ahead)
             return np.where(abs(self.speed) <= stop, self.speed, np.copysign(stop, self.speed)), z, z
         e, de, dde = self.profile.evaluate(eta1)
+        if self.identified_profile is not None and (self._replan_w > 0.0).any():
+            w = self._replan_w
+            e1, de1, dde1 = self.identified_profile.evaluate(eta1)
+            k = 1.0 - w
+            e, de, dde = k * e + w * e1, k * de + w * de1, k * dde + w * dde1
         if self._closed:
             return e, de, dde
         sign = 1.0 if self.speed > 0.0 else -1.0
@@ -788,6 +800,12 @@ class BatchFollower:
                 bad = ~np.all(np.isfinite(np.array(y + v)), axis=0)
                 if bad.any():
                     raise FloatingPointError("batch compensator: a non-finite prediction (the scalar one resets here)")
+                if self.identified_profile is not None and comp.identifier is not None:
+                    # PathFollower._replans: an adoption with the model's lag
+                    adopted = ~np.isnan(comp._identified[3]) & (comp._identified[0] <= self.scalar.vehicle.accel_lag_xy_s + 1e-9)
+                    self._replan_t0 = np.where(adopted & np.isnan(self._replan_t0), t_s, self._replan_t0)
+                    x = np.clip((t_s - self._replan_t0) / REPLAN_BLEND_S, 0.0, 1.0)
+                    self._replan_w = np.where(np.isnan(self._replan_t0), 0.0, x * x * (3.0 - 2.0 * x))
                 # as the scalar: the measured state's closest point first, the law's searched from it
                 lam_meas = self._measured_projector.update(*y_meas)  # type: ignore[union-attr]
                 self.projector.seed(lam_meas, *y, *y_meas)

@@ -150,3 +150,39 @@ def test_rollbacks_equal_the_scalar_ones(monkeypatch: pytest.MonkeyPatch) -> Non
         assert (m is None) == np.isnan(found["adopted_at_s"][i])
         if m is not None:
             assert abs(m.delay_s - found["delay_s"][i]) <= 1e-9 and abs(m.adopted_at_s - found["adopted_at_s"][i]) <= 1e-9
+
+
+def test_identifying_followers_replan_their_speed_profile_as_the_scalar_ones() -> None:
+    """With a speed profile and ``identify_online``, each flight re-plans for the identified
+    response from its own adoption (``PathFollower.identified_profile``, blended in): the batch
+    rows follow their scalar followers through the adoptions and the blends."""
+    from pf_offboard.control.profile import REPLAN_BLEND_S, SpeedProfileSpec
+
+    cfg = load_config(CONFIGS / "figure8.yaml")
+    cfg = dataclasses.replace(cfg, compensation=dataclasses.replace(cfg.compensation, identify_online=True),
+                              speed_profile=SpeedProfileSpec(max_speed_m_s=3.0))  # fmt: skip
+    n, steps, dt = 12, 700, 0.01
+    rng = np.random.default_rng(11)
+    proto = PathFollower.from_config(cfg)
+    assert proto.identified_profile is not None
+    scalar = [copy.deepcopy(proto) for _ in range(n)]
+    batch = BatchFollower(copy.deepcopy(proto), n)
+    pos, vel = _states(scalar[0].path, n, rng)
+    worst = 0.0
+    blending = set()
+    for k in range(steps):
+        t = dt * k
+        cb = batch.update(pos, vel, t)
+        for i, f in enumerate(scalar):
+            c = f.update(pos[i], vel[i], t)
+            for a, b in ((c.acceleration, cb.acceleration[i]), (c.eta2_ref_m_s, cb.eta2_ref_m_s[i]), (c.state[:2], (cb.eta1[i], cb.eta2[i]))):
+                worst = max(worst, float(np.max(np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float)))))
+            assert f._replan_w == batch._replan_w[i]
+            if 0.0 < f._replan_w < 1.0:
+                blending.add(i)
+        pos = pos + dt * vel
+        vel = vel + dt * cb.acceleration + rng.normal(0.0, 0.05, vel.shape)
+    assert worst <= 1e-9, worst
+    starts = {f._replan_t0 for f in scalar}
+    assert blending and len(starts) >= 3 and None not in starts, starts  # re-planned at their own instants
+    assert any(f._replan_w == 1.0 for f in scalar) and steps * dt > REPLAN_BLEND_S
