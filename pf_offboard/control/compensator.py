@@ -58,6 +58,13 @@ OFFSET_INTEGRAL_BAND_M = 0.2
 # How fast the identified lag and dead time may move the model (s per s of flight).
 ADAPT_SLEW = 0.1
 ADAPT_DRAG_SLEW = 0.5  # 1/s per s
+# After a bank candidate's adoption the compensator follows its live drag estimate through a
+# low-pass of DRAG_FOLLOW_S (starting from the adopted value). That drag is a gradient estimate
+# whose bandwidth grows with the speed squared (DRAG_RATE |v|^2: ~23 1/s at 2.4 m/s): followed
+# directly it swung 0.15-0.4 1/s at the flight's own ~1 Hz and drove the mock ArduCopter's `rates`
+# helix at 3 m/s off the path (99 cm RMS, 3.6 m max; followed through 1-4 s: 0.7-0.8 cm). The joint
+# bank's least-squares drag (FIT_MEMORY_S) is smooth and followed as it is.
+DRAG_FOLLOW_S = 2.0
 ADAPT_GAIN_SLEW = 0.1  # horizontal gain per s
 ADOPT_VERTICAL = True  # a joint model's vertical gain and drag are adopted with it
 # identify_lags_up_to: a lag longer than the model's, up to LONG_LAG_MAX_FACTOR x it, is adopted
@@ -205,6 +212,7 @@ class InnerLoopCompensator:
             initial=(model.accel_lag_xy_s, self.delay_s), longer_delays_s=[d for d in DELAYS_S if d > self.delay_s],
         ) if adapt else None  # fmt: skip
         self._target: tuple[float, float] | None = None
+        self._drag_followed: float | None = None  # the live drag, low-passed (DRAG_FOLLOW_S)
         # what the identifier adopted last (its drag then; None: the model flown is the given one)
         self.identified: IdentifiedModel | None = None
         # the rollback guard (GUARD_*): the watch after an adoption, the model restored, the last rollback
@@ -376,6 +384,7 @@ class InnerLoopCompensator:
             z = ident.vertical
             self.identified = IdentifiedModel(best[0], best[1], ident.drag_1_s or 0.0, time_s, ident.gain_xy or 1.0,
                                               *(z if z is not None else (self.gain[2], self.drag[2])))  # fmt: skip
+            self._drag_followed = ident.drag_1_s
         dt = time_s - t_prev
         if time_s < self._rollback_until_s:  # rolling back: faster than an adoption
             dt *= GUARD_SLEW_FACTOR
@@ -385,7 +394,12 @@ class InnerLoopCompensator:
             return
         if self._target is None:
             return
-        self._move_to_target(dt, self._target, ident.drag_1_s, ident.gain_xy, ident.vertical)
+        drag, vertical = ident.drag_1_s, ident.vertical
+        if drag is not None and vertical is None:  # the bank's gradient drag: through a low-pass (DRAG_FOLLOW_S)
+            f = self._drag_followed
+            c = (time_s - t_prev) / DRAG_FOLLOW_S
+            self._drag_followed = drag = drag if f is None else f + (c if c < 1.0 else 1.0) * (drag - f)
+        self._move_to_target(dt, self._target, drag, ident.gain_xy, vertical)
 
     def watch(self, time_s: float, cross_track_m: float, speed_error_m_s: float) -> None:
         """The rollback guard's step (GUARD_*), with the measured cross-track error (m) and speed

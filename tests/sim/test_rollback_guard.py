@@ -94,10 +94,8 @@ def test_an_unforced_flight_never_fires_it(tmp_path: Path) -> None:
 @pytest.mark.parametrize("fast", [False, True])
 def test_normal_flights_never_fire_it(tmp_path: Path, vehicle: str, mode: str, name: str, fast: bool) -> None:
     """The held-out configs (a path and a speed; and with speed_profile.max_speed_m_s 3) on both
-    realistic mock presets, 30 s: whatever they adopt, the guard never undoes it."""
-    if fast and name == "helix" and vehicle == "arducopter" and mode == "rates":
-        pytest.skip("this mock flight leaves the 3 m/s helix from 10.5 s on (3 m off at 14.5 s) with or without "
-                    "the guard: not a normal flight (the guard then undoes the adoption of 3.02 s, harmlessly)")
+    realistic mock presets, 30 s: whatever they adopt, the guard never undoes it, and they stay
+    on the path."""
     config = tmp_path / f"{name}.yaml"
     text = (PATH.parent / f"{name}.yaml").read_text()
     config.write_text(text + ("speed_profile:\n  max_speed_m_s: 3.0\n" if fast else ""))
@@ -109,3 +107,11 @@ def test_normal_flights_never_fire_it(tmp_path: Path, vehicle: str, mode: str, n
     print(f"{vehicle} {mode} {name} fast={fast}: adopted {comp.identified}")
     assert not f.crashed
     assert comp.rolled_back is None
+    # and none leaves the path: the arducopter rates helix at 3 m/s did (99 cm RMS, 3.6 m max; now
+    # 3.2 cm max) while the compensator followed the bank's gradient drag directly
+    # (compensator.DRAG_FOLLOW_S); the largest now, 40 cm, is px4-sih rates on the 3 m/s
+    # figure-eight as the joint model slews in (37 cm before that change)
+    proj, est = Projector(f.path), f.estimate_enu_m[f.time_s >= f.activation_s + 3.0]
+    worst = max(float(np.linalg.norm(p - f.path.eval(float(proj.update(p))).sigma)) for p in est)
+    print(f"  cross-track (the estimate's) from activation + 3 s: max {100 * worst:.1f} cm")
+    assert worst < 0.5

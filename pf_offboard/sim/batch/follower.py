@@ -26,6 +26,7 @@ from pf_offboard.control.compensator import (
     GUARD_TIME_S,
     GUARD_WATCH_S,
     ADAPT_DRAG_SLEW,
+    DRAG_FOLLOW_S,
     ADAPT_GAIN_SLEW,
     ADAPT_SLEW,
     ADOPT_VERTICAL,
@@ -213,6 +214,7 @@ class _Compensator:
             self.gain = (full(c.gain[0]), full(c.gain[1]), full(c.gain[2]))
             target = c._target if c._target is not None else (math.nan, math.nan)
             self._target = (full(target[0]), full(target[1]))
+            self._drag_f = full(math.nan if c._drag_followed is None else c._drag_followed)  # the scalar's _drag_followed
             m = c.identified
             known = (math.nan,) * 7 if m is None else (m.lag_s, m.delay_s, m.drag_1_s, m.adopted_at_s, m.gain_xy, m.gain_z, m.drag_z_1_s)
             self._identified = tuple(full(x) for x in known)  # what was adopted last, per flight
@@ -401,12 +403,19 @@ class _Compensator:
                 new = (lag, delay, self.identifier.drag_1_s, np.full(self.n, time_s), np.where(np.isnan(gain), 1.0, gain),
                        np.where(np.isnan(gz), self.gain[2], gz), np.where(np.isnan(cz), self.drag[2], cz))  # fmt: skip
                 self._identified = tuple(np.where(adopt, x, old) for x, old in zip(new, self._identified))
+                self._drag_f = np.where(adopt, self.identifier.drag_1_s, self._drag_f)
         dt = time_s - t_prev
         dtv = np.where(time_s < self._rollback_until, dt * GUARD_SLEW_FACTOR, dt)
         rows = ~np.isnan(self._target[0]) & ~self._restoring
         if rows.any():
             ident = self.identifier
-            self._move_to_target(dtv, rows, self._target, ident.drag_1_s, ident.gain_xy, ident.vertical)  # type: ignore[arg-type]
+            live, (gz, cz) = ident.drag_1_s, ident.vertical
+            c = min(1.0, dt / DRAG_FOLLOW_S)
+            f = np.where(np.isnan(self._drag_f), live, self._drag_f + c * (live - self._drag_f))
+            follow = rows & ~np.isnan(live) & np.isnan(cz)  # a bank candidate's drag (a joint one's: as it is)
+            self._drag_f = np.where(follow, f, self._drag_f)
+            drag = np.where(follow, f, live)
+            self._move_to_target(dtv, rows, self._target, drag, ident.gain_xy, (gz, cz))  # type: ignore[arg-type]
         if self._restoring.any():  # rolled back to the initial model
             r = self._r
             self._move_to_target(dtv, self._restoring, (r[0], r[1]), r[5], r[2], (r[4], r[7]))  # type: ignore[arg-type]
