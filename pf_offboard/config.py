@@ -106,9 +106,12 @@ class FlightConfig:
     attitude_time_constant_s: float | None = None
     # time constant (s) of the correction that makes the velocity estimate agree with the position
     # estimate's derivative (pf_offboard.app.estimator); None (null): the velocity as reported.
-    # 0.3 s: on the real PX4 SIH 3.5-4.2 cm cross-track RMS in every output mode (0.5 s: 3.9-5.3;
-    # 1 s: 5.0-7.5; off: 10.9-17.7), docs/app.md
-    velocity_correction_s: float | None = 0.3
+    # 0.1 s: the law then damps with the velocity of the position it steers up to ~1.6 Hz; on the
+    # real PX4 SIH, default config, 1.5 m/s, it cut the speed error's part that is the velocity's
+    # disagreement with the position's derivative from ~4 to ~2.4 cm/s RMS and the cross-track
+    # by ~1 cm against 0.3 s (docs/design-decisions.md, The estimate); 0.3 s: 3.5-4.2 cm with the
+    # earlier gains (0.5 s: 3.9-5.3; 1 s: 5.0-7.5; off: 10.9-17.7), docs/app.md
+    velocity_correction_s: float | None = 0.1
 
 
 # flight.velocity_correction_s's range (s); `identify --velocity-correction` takes the same

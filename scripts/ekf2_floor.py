@@ -8,6 +8,9 @@ Per flight, from activation + 8 s (the campaign's window), RMS in the bands 0-0.
   ct      the estimate's cross-track vector (position minus the path's closest point)
   speed   the speed error along the path (position's derivative +-0.1 s, minus the reference)
   ekf_x   EKF2's error across the path; ekf_v: the derivative (+-0.1 s) of its error along the path
+          (what a vehicle flying the truth perfectly would read as its speed error)
+  inc     the speed error's part that is the app's velocity (flight.velocity_correction_s)
+          disagreeing with the position's derivative (one for one in the speed error)
 and, on a closed path, the lap-locked part of ct / speed (their mean over laps by path parameter,
 in 100 bins) and the share of steps with a saturation flag.
 """
@@ -84,6 +87,9 @@ def analyse(run: Path, settle_s: float = 8.0) -> dict[str, object]:
         if end.any():
             w &= t < t[end][0]
     out: dict[str, object] = {"name": f"{run.parent.name}/{run.name}", "ct": bands(t[w], (p - closest)[w]), "speed": bands(t[w], speed[w])}
+    v = np.array([r.velocity_enu_m_s for r in recs], dtype=float)
+    inc = speed + np.array([r.speed_ref_m_s for r in recs]) - np.einsum("ij,ij->i", v, tang)
+    out["inc"] = bands(t[w], inc[w])
     out["sat"] = float(np.mean([r.sat_tangential or r.sat_transversal or r.sat_tilt or r.sat_thrust for r, k in zip(recs, w) if k]))
     if path.closed:
         out["ct_lap"] = lap_locked(lam[w], np.array([r.cross_track_m for r, k in zip(recs, w) if k]), path.lam_max)
@@ -124,7 +130,7 @@ def main(argv: list[str]) -> int:
             if "ct_lap" in a:
                 cl, sl = a["ct_lap"], a["speed_lap"]  # type: ignore[misc]
                 lap = f" | lap ct {100 * cl[0]:.1f}/{100 * cl[1]:.1f} cm, speed {100 * sl[0]:.1f}/{100 * sl[1]:.1f} cm/s"
-            print(f"{a['name']}: {fmt('ct', a['ct'], 'cm')} | {fmt('speed', a['speed'], 'cm/s')} | "  # type: ignore[arg-type]
+            print(f"{a['name']}: {fmt('ct', a['ct'], 'cm')} | {fmt('speed', a['speed'], 'cm/s')} | {fmt('inc', a['inc'], 'cm/s')} | "  # type: ignore[arg-type]
                   f"{fmt('ekf_x', a.get('ekf_x'), 'cm')} | {fmt('ekf_v', a.get('ekf_v'), 'cm/s')} | sat {100 * a['sat']:.0f}%{lap}")  # type: ignore[arg-type, operator]
     return 0
 

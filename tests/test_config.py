@@ -66,7 +66,7 @@ def test_velocity_correction_is_on_by_default_and_null_turns_it_off():
     from pf_offboard.app.fly import flight_settings
 
     no_flags = argparse.Namespace(output=None, end_action=None)
-    assert flight_settings(parse_config(minimal()), no_flags).velocity_correction_s == 0.3
+    assert flight_settings(parse_config(minimal()), no_flags).velocity_correction_s == 0.1
     data = minimal()
     data["flight"] = {"velocity_correction_s": None}
     assert parse_config(data).flight.velocity_correction_s is None

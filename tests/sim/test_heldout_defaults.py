@@ -96,7 +96,10 @@ def test_px4_sih_as_shipped_the_truth_is_the_estimates_error(tmp_path, monkeypat
     print(f"  the estimate: {100 * m.estimate_cross_track_rms_m:.2f} cm from the path, {100 * m.estimate_error_rms_m:.2f} cm from the truth")
     assert m.estimate_cross_track_rms_m <= 0.04
     assert m.cross_track_rms_m <= m.estimate_error_rms_m + m.estimate_cross_track_rms_m
-    assert m.speed_error_rms_m_s <= 0.14 and abs(m.speed_error_mean_m_s) <= 0.05
+    # the true mean follows the estimate's wander over the ~12 s window: figure-eight -5.7 cm/s with
+    # the 0.1 s velocity correction (the vehicle follows its estimate's position more closely),
+    # -3.7 with 0.3 s; racetrack -2.6 (0.3 s: -3.8)
+    assert m.speed_error_rms_m_s <= 0.14 and abs(m.speed_error_mean_m_s) <= 0.065
 
 
 @pytest.mark.parametrize(
