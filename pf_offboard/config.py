@@ -105,17 +105,19 @@ class FlightConfig:
     # vehicle.rate_time_constant_s (4x it), or 0.25 s when that is unknown (see control/attitude.py)
     attitude_time_constant_s: float | None = None
     # time constant (s) of the correction that makes the velocity estimate agree with the position
-    # estimate's derivative (pf_offboard.app.estimator); None (null): the velocity as reported.
-    # 0.1 s: the law then damps with the velocity of the position it steers up to ~1.6 Hz; on the
-    # real PX4 SIH, default config, 1.5 m/s, it cut the speed error's part that is the velocity's
-    # disagreement with the position's derivative from ~4 to ~2.4 cm/s RMS and the cross-track
-    # by ~1 cm against 0.3 s (docs/design-decisions.md, The estimate); 0.3 s: 3.5-4.2 cm with the
-    # earlier gains (0.5 s: 3.9-5.3; 1 s: 5.0-7.5; off: 10.9-17.7), docs/app.md
-    velocity_correction_s: float | None = 0.1
+    # estimate's derivative (pf_offboard.app.estimator); None (null): the velocity as reported;
+    # "auto": the autopilot's (pf_offboard.app.profiles.Profile.velocity_correction_s: PX4 0.1 s,
+    # ArduPilot 0.3 s). 0.1 s on PX4: the law then damps with the velocity of the position it
+    # steers up to ~1.6 Hz; on the real PX4 SIH, default config, 1.5 m/s, it cut the speed error's
+    # part that is the velocity's disagreement with the position's derivative from ~4 to ~2.4 cm/s
+    # RMS and the cross-track by ~1 cm against 0.3 s (docs/design-decisions.md, The estimate);
+    # 0.3 s: 3.5-4.2 cm with the earlier gains (0.5 s: 3.9-5.3; 1 s: 5.0-7.5; off: 10.9-17.7)
+    velocity_correction_s: float | str | None = "auto"  # auto: the autopilot's (PX4 0.1, ArduPilot 0.3); null: the velocity as reported
 
 
 # flight.velocity_correction_s's range (s); `identify --velocity-correction` takes the same
 VELOCITY_CORRECTION_RANGE_S = (0.05, 60.0)
+VELOCITY_CORRECTION_AUTO = "auto"  # flight.velocity_correction_s: the autopilot's
 
 
 # The ``compensation:`` section is the core's Compensation: one set of defaults for the config
@@ -471,9 +473,9 @@ def _flight(data: Any) -> FlightConfig:
             d, "attitude_time_constant_s", "flight.attitude_time_constant_s", f.attitude_time_constant_s, 0.01, 2.0,
             nullable=True,
         ),
-        velocity_correction_s=_number(
+        velocity_correction_s=(VELOCITY_CORRECTION_AUTO if d.get("velocity_correction_s") == VELOCITY_CORRECTION_AUTO else _number(
             d, "velocity_correction_s", "flight.velocity_correction_s", f.velocity_correction_s, *VELOCITY_CORRECTION_RANGE_S, nullable=True,
-        ),
+        )),  # fmt: skip
     )
 
 

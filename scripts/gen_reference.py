@@ -178,7 +178,7 @@ def _range(f: Field) -> str:
     lo = "" if f.lo is None else (f"> {f.lo:g}" if f.lo_open else f"≥ {f.lo:g}")
     hi = "" if f.hi is None else f"≤ {f.hi:g}"
     text = ", ".join(x for x in (lo, hi) if x)
-    return text + (" or null" if f.nullable else "")
+    return text + (" or null" if f.nullable else "") + (" or auto" if f.default == "auto" else "")
 
 
 def _default(f: Field) -> str:

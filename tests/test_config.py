@@ -60,20 +60,31 @@ def test_defaults_for_everything_but_the_path():
     assert cfg.path.frame == "enu" and cfg.path.moving_frame == "auto"
 
 
-def test_velocity_correction_is_on_by_default_and_null_turns_it_off():
+def test_velocity_correction_is_the_autopilots_by_default_and_null_turns_it_off():
     import argparse
 
     from pf_offboard.app.fly import flight_settings
+    from pf_offboard.app.profiles import ARDUPILOT, PX4
 
     no_flags = argparse.Namespace(output=None, end_action=None)
-    assert flight_settings(parse_config(minimal()), no_flags).velocity_correction_s == 0.1
+    default = flight_settings(parse_config(minimal()), no_flags)
+    assert default.velocity_correction_s == "auto"
+    # PX4's EKF2 velocity disagrees with its position: corrected fast; ArduPilot's EKF3 agrees
+    assert default.velocity_correction_for(PX4) == 0.1 and default.velocity_correction_for(ARDUPILOT) == 0.3
     data = minimal()
+    data["flight"] = {"velocity_correction_s": "auto"}
+    assert parse_config(data).flight.velocity_correction_s == "auto"
     data["flight"] = {"velocity_correction_s": None}
     assert parse_config(data).flight.velocity_correction_s is None
-    assert flight_settings(parse_config(data), no_flags).velocity_correction_s is None
-    data["flight"] = {"velocity_correction_s": 0.01}
-    with pytest.raises(ConfigError, match="flight.velocity_correction_s"):
-        parse_config(data)
+    off = flight_settings(parse_config(data), no_flags)
+    assert off.velocity_correction_for(PX4) is None and off.velocity_correction_for(ARDUPILOT) is None
+    data["flight"] = {"velocity_correction_s": 0.5}
+    fixed = flight_settings(parse_config(data), no_flags)
+    assert fixed.velocity_correction_for(PX4) == 0.5 and fixed.velocity_correction_for(ARDUPILOT) == 0.5
+    for bad in (0.01, "fast", True):
+        data["flight"] = {"velocity_correction_s": bad}
+        with pytest.raises(ConfigError, match="flight.velocity_correction_s"):
+            parse_config(data)
 
 
 def test_ned_waypoints_and_yaw_are_converted():
@@ -253,7 +264,7 @@ def test_every_numeric_field_is_in_the_schema():
     from dataclasses import fields
 
     covered = {k[-1] for k in NUMERIC_FIELDS}
-    schema = {f.name for f in fields(FlightConfig) if f.type in ("float", "float | None")}
+    schema = {f.name for f in fields(FlightConfig) if f.type in ("float", "float | None", "float | str | None")}
     schema |= {f.name for f in fields(Limits)}
     assert len(schema) == 13
     assert schema <= covered, schema - covered

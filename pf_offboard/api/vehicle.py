@@ -530,7 +530,7 @@ class Vehicle:
                 link.start_reading(self._dispatch)  # (reading the origin used the link's reader)
                 if log is not None and hooks.config_path is not None:
                     log.write_config(hooks.config_path, config)
-            estimator = Estimator(settings.state_source, fs.velocity_correction_s)
+            estimator = Estimator(settings.state_source, fs.velocity_correction_for(profile))
             height_m = settings.height_m
             if config is None:
                 follower: Any = hooks.follower_factory(estimator) if hooks.follower_factory is not None else _NoFollower()

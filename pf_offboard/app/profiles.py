@@ -88,6 +88,13 @@ class Profile:
     # in-flight identification may then adopt a lag up to 1.5 x the model's (app.pipeline). PX4
     # tracks the rates directly.
     rates_through_attitude_target: bool = False
+    # flight.velocity_correction_s when the config leaves it ``auto`` (s; None: off): how fast the
+    # app makes the velocity estimate agree with the position estimate's derivative
+    # (pf_offboard.app.estimator). PX4's EKF2 reports a velocity 10-40 cm/s off its own position's
+    # derivative (SIH): 0.1 s made real PX4 SIH flights 3.1-4.3 cm (0.3 s: 3.9-6.3). ArduPilot's EKF3
+    # agrees with itself: 0.1 s only added the position derivative's noise (real ArduCopter `rates`
+    # figure-eight 3.2-3.4 cm/s against 2.6 at 0.3 s). docs/design-decisions.md, The estimate
+    velocity_correction_s: float | None = 0.3
     # HEARTBEAT custom_mode bits that identify our mode (PX4: the main mode only; it leaves the
     # sub mode 0 in OFFBOARD)
     offboard_mode_mask: int = 0xFFFFFFFF
@@ -198,6 +205,7 @@ PX4 = Profile(
     attitude_rates_ff=(False, False, True),
     accel_tilt_param="MPC_ACC_DECOUPLE",
     accel_tilt_limit_params=(("MPC_TILTMAX_AIR", 1.0),),
+    velocity_correction_s=0.1,
     offboard_mode_mask=0xFF << 16,
     params_bytewise=True,
     mode_names=px4_mode_name,

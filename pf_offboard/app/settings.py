@@ -22,7 +22,15 @@ class FlightSettings:
     hover_thrust: float | None
     end_action: str
     attitude_time_constant_s: float
-    velocity_correction_s: float | None  # pf_offboard.app.estimator; None: off
+    velocity_correction_s: float | str | None  # pf_offboard.app.estimator; None: off; "auto": the autopilot's
+
+    def velocity_correction_for(self, profile: Any) -> float | None:
+        """The velocity correction's time constant (s; None: off) flown with this autopilot
+        (``profile``, pf_offboard.app.profiles): the configured one, or the autopilot's when
+        the config leaves it ``auto``."""
+        if self.velocity_correction_s == "auto":
+            return profile.velocity_correction_s  # type: ignore[no-any-return]
+        return self.velocity_correction_s  # type: ignore[return-value]
 
 
 def flight_settings_for(config: Any, output: str | None = None, end_action: str | None = None) -> FlightSettings:

@@ -316,7 +316,7 @@ def build_pipeline(
     if tilt is not None and hasattr(follower, "cap_tilt"):
         follower.cap_tilt(tilt)  # as fly: min(limits.max_tilt_deg, the autopilot's)
     source = options.state_source or _state_source_of(entries)
-    return Pipeline(follower, encoder, Estimator(source, settings.velocity_correction_s)), profile, output_mode, target_system
+    return Pipeline(follower, encoder, Estimator(source, settings.velocity_correction_for(profile))), profile, output_mode, target_system
 
 
 def replay_flight(

@@ -347,7 +347,7 @@ class SimFlight:
             hover_thrust=settings.hover_thrust if settings.hover_thrust is not None else 0.5,
             time_constant_s=settings.attitude_time_constant_s,
         )  # fmt: skip
-        self.pipeline = Pipeline(follower, encoder, Estimator("local_position", settings.velocity_correction_s))
+        self.pipeline = Pipeline(follower, encoder, Estimator("local_position", settings.velocity_correction_for(self.profile)))
         self._tilt_params: dict[str, float] = {}  # the autopilot's tilt limit parameters as reported
         self.laps = LapCounter(self.path.length_m, self.path.closed)
         self.end = EndSpec(laps=spec.laps, duration_s=None)

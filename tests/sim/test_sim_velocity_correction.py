@@ -27,7 +27,7 @@ from .helpers import errors, fly_px4_sih
 
 def _fly(tmp: Path, corrected: bool, time_constant_s: float | None = None) -> float:
     def edit(data: dict[str, Any]) -> None:
-        assert data["flight"].get("velocity_correction_s", 0.1) == 0.1  # as shipped (the default)
+        assert data["flight"].get("velocity_correction_s", "auto") == "auto"  # as shipped (the default: PX4's 0.1 s)
         if not corrected:
             data["flight"]["velocity_correction_s"] = None
         elif time_constant_s is not None:

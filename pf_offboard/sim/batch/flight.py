@@ -273,7 +273,7 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
     timed = follower.compensator is not None
     profiled = follower.profile is not None
     speed_ref = float(setup.follower.speed)
-    tau = setup.flight.velocity_correction_s
+    tau = setup.flight.velocity_correction_for(setup.profile)
     bias = np.zeros((3, n))
     prev: tuple[float, Arr, Arr] | None = None
     nan = math.nan
