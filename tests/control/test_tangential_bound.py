@@ -134,4 +134,6 @@ def test_on_the_px4_sih_mock_the_bound_acts_only_at_the_start(tmp_path, speed):
     assert all(r.speed_ref_m_s == speed for r in after)
     assert not any(r.sat_tangential for r in after)
     first = [r for r in recs if r.time_s < t0 + 1.0]
-    assert max(_tilt_deg(r.accel_cmd_enu_m_s2) for r in first) < 20.0
+    # the first second's largest commanded tilt, at 3 m/s: 19.7 deg with a 0.3 s velocity correction,
+    # 21.0 with PX4's 0.1 s (a velocity that follows the position's noisier derivative); the limit is 45
+    assert max(_tilt_deg(r.accel_cmd_enu_m_s2) for r in first) < 23.0
