@@ -81,9 +81,8 @@ def analyse(run: Path, settle_s: float = 8.0) -> dict[str, object]:
     t_act = t[act][0]
     w = act & (t >= t_act + settle_s)
     if not path.closed:  # as the campaign: up to the open path's end or where the reference slows for it
-        ref = np.abs([r.speed_ref_m_s for r in recs])
-        nominal = ref[act].max()
-        end = act & ((lam >= path.lam_max - 1e-6) | ((t > t_act + settle_s) & (ref < 0.99 * nominal)))
+        slowing = measures.final_slowdown([r.speed_ref_m_s for r in recs], act & (t > t_act + settle_s))
+        end = act & ((lam >= path.lam_max - 1e-6) | slowing)
         if end.any():
             w &= t < t[end][0]
     out: dict[str, object] = {"name": f"{run.parent.name}/{run.name}", "ct": bands(t[w], (p - closest)[w]), "speed": bands(t[w], speed[w])}

@@ -116,12 +116,11 @@ def measure(log_dir: Path, config: Path, ulog: Path | None, settle_s: float = 8.
         # reported apart
         import numpy as np
 
-        # (or where the reference starts to slow down for the stop at the end, after the start)
+        # (or where the reference starts its final slow-down for the stop at the end, after the start)
         active = [r for r in recs if r.active]
-        nominal = max((abs(r.speed_ref_m_s) for r in active), default=0.0)
         t_mid = active[0].time_s + settle_s if active else math.inf
-        at_end = [i for i, r in enumerate(recs) if r.active and (r.lam >= path.lam_max - 1e-6 or
-                  (r.time_s > t_mid and abs(r.speed_ref_m_s) < 0.99 * nominal))]  # fmt: skip
+        slowing = measures.final_slowdown([r.speed_ref_m_s for r in recs], [r.active and r.time_s > t_mid for r in recs])
+        at_end = [i for i, r in enumerate(recs) if r.active and (r.lam >= path.lam_max - 1e-6 or slowing[i])]
         if at_end:
             after = recs[at_end[0]:]
             out["past_the_end"] = {"cross_track_max_m": max(r.cross_track_m for r in after),
