@@ -294,8 +294,10 @@ class PathFollower:
         self._speed_profile_spec, self._response_s = speed_profile, response_s
         # re-planned for the identified response once the compensator adopts one (blended in from
         # then: replan_weight); None without a profile or without online identification
-        self._replan_t0: float | None = None
+        self._replan_t0: float | None = None  # when the weight last started moving (None: never)
         self._replan_w = 0.0
+        self._replan_target = False  # the re-planned profile wanted: an adopted model it was planned for
+        self._replan_from = 0.0  # the weight when it started moving
         self.identified_profile = self._identified_profile()
         self._yaw = YawProfile(self.yaw, path.length_m, path.closed, speed)
         self._closed = bool(path.closed)
@@ -606,11 +608,15 @@ class PathFollower:
             if not _finite(y, v):
                 comp.reset()
                 y, v = y_meas, v_meas
-            if self.identified_profile is not None and (self._replan_t0 is not None or self._replans(comp.identified)):
-                # the identified response's profile, blended in from its adoption
-                if self._replan_t0 is None:
-                    self._replan_t0 = t_s
-                self._replan_w = replan_weight(t_s - self._replan_t0)
+            if self.identified_profile is not None:
+                # the identified response's profile, blended in from its adoption; blended out again
+                # if the rollback guard returns to a model it was not planned for (the typical one)
+                want = self._replans(comp.identified)
+                if want != self._replan_target:
+                    self._replan_target, self._replan_from, self._replan_t0 = want, self._replan_w, t_s
+                if self._replan_t0 is not None:
+                    k, target = replan_weight(t_s - self._replan_t0), (1.0 if self._replan_target else 0.0)
+                    self._replan_w = self._replan_from + (target - self._replan_from) * k
         lam_meas: float | None = None
         if comp is not None:
             # the measured state's closest point first; the law's (at the prediction) is searched

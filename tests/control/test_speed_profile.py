@@ -295,3 +295,29 @@ def test_an_identified_response_replans_the_profile_without_a_step_in_the_refere
     assert g._replan_w == 0.0 and abs(kept[-1] - v0) < 1e-3
     # nothing to identify: nothing to re-plan
     assert PathFollower(f.path, 1.5, speed_profile=spec, compensation=Compensation(identify_online=False)).identified_profile is None
+
+
+def test_a_rollback_to_the_typical_model_blends_the_first_plan_back() -> None:
+    """The rollback guard returning to the typical model (no adopted model): the profile planned
+    for it comes back, blended over REPLAN_BLEND_S from the rollback, without a step."""
+    from pf_offboard.control.adaptive import IdentifiedModel
+    from pf_offboard.control.profile import REPLAN_BLEND_S
+
+    spec = SpeedProfileSpec(3.0)
+    f = PathFollower(_follower(PAPER_YAML, spec).path, 1.5, speed_profile=spec)
+    grid = np.linspace(0.0, f.path.length_m, 400)
+    eta1 = float(grid[np.argmax([abs(f.identified_profile.evaluate(x)[0]) - abs(f.profile.evaluate(x)[0]) for x in grid])])
+    v0, v1 = abs(f.profile.evaluate(eta1)[0]), abs(f.identified_profile.evaluate(eta1)[0])
+    pt = f.path.eval(0.3 * f.path.lam_max)
+    tangent = np.asarray(pt.d1) / np.linalg.norm(pt.d1)
+    dt, refs, t = 0.02, [], 0.0
+    for identified in (IdentifiedModel(0.1, 0.13, 0.9, 0.0, 0.95, 0.95, 0.9), None):  # adopted, then rolled back
+        f.compensator.identified = identified
+        for _ in range(int(round((REPLAN_BLEND_S + 1.0) / dt))):
+            f.update(pt.sigma, 2.0 * tangent, time_s=t)
+            refs.append(abs(f.reference(eta1)[0]))
+            t += dt
+        assert abs(refs[-1] - (v1 if identified is not None else v0)) < 1e-9, (refs[-1], v0, v1)
+    steps = np.abs(np.diff(refs))
+    assert steps.max() <= 1.5 * dt / REPLAN_BLEND_S * abs(v1 - v0) * 1.05 + 1e-6, steps.max()
+    assert f._replan_w == 0.0

@@ -652,6 +652,8 @@ class BatchFollower:
         t0 = getattr(follower, "_replan_t0", None)
         self._replan_t0 = np.full(n, math.nan if t0 is None else float(t0))
         self._replan_w = np.full(n, float(getattr(follower, "_replan_w", 0.0)))
+        self._replan_target = np.full(n, bool(getattr(follower, "_replan_target", False)))
+        self._replan_from = np.full(n, float(getattr(follower, "_replan_from", 0.0)))
         self.compensator = _Compensator(follower.compensator, n) if follower.compensator is not None else None
         self._measured_projector = BatchProjector(follower.path, n, self.bpath) if self.compensator is not None else None
         self._yaw = follower._yaw
@@ -812,9 +814,13 @@ class BatchFollower:
                 if self.identified_profile is not None and comp.identifier is not None:
                     # PathFollower._replans: an adoption with the model's lag
                     adopted = ~np.isnan(comp._identified[3]) & (comp._identified[0] <= self.scalar.vehicle.accel_lag_xy_s + 1e-9)
-                    self._replan_t0 = np.where(adopted & np.isnan(self._replan_t0), t_s, self._replan_t0)
+                    switch = adopted != self._replan_target  # blended in from an adoption, out after a rollback
+                    self._replan_from = np.where(switch, self._replan_w, self._replan_from)
+                    self._replan_t0 = np.where(switch, t_s, self._replan_t0)
+                    self._replan_target = adopted
                     x = np.clip((t_s - self._replan_t0) / REPLAN_BLEND_S, 0.0, 1.0)
-                    self._replan_w = np.where(np.isnan(self._replan_t0), 0.0, x * x * (3.0 - 2.0 * x))
+                    k, target = x * x * (3.0 - 2.0 * x), adopted.astype(float)
+                    self._replan_w = np.where(np.isnan(self._replan_t0), 0.0, self._replan_from + (target - self._replan_from) * k)
                 # as the scalar: the measured state's closest point first, the law's searched from it
                 lam_meas = self._measured_projector.update(*y_meas)  # type: ignore[union-attr]
                 self.projector.seed(lam_meas, *y, *y_meas)
