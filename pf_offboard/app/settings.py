@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pf_offboard.config import VELOCITY_CORRECTION_AUTO
 from pf_offboard.errors import InputError
 
 
@@ -28,7 +29,7 @@ class FlightSettings:
         """The velocity correction's time constant (s; None: off) flown with this autopilot
         (``profile``, pf_offboard.app.profiles): the configured one, or the autopilot's when
         the config leaves it ``auto``."""
-        if self.velocity_correction_s == "auto":
+        if self.velocity_correction_s == VELOCITY_CORRECTION_AUTO:
             return profile.velocity_correction_s  # type: ignore[no-any-return]
         return self.velocity_correction_s  # type: ignore[return-value]
 
