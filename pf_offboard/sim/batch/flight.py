@@ -22,7 +22,6 @@ that is not finite, an implausible estimator jump).
 
 from __future__ import annotations
 
-import argparse
 import math
 import tempfile
 from collections.abc import Sequence
@@ -51,9 +50,9 @@ class _Setup:
     def __init__(self, config_yaml: str, settings: Any) -> None:
         from sitl_mock.dynamics import preset
 
-        from pf_offboard.app.fly import flight_settings
         from pf_offboard.app.pipeline import fit_identification_to_output
         from pf_offboard.app.profiles import PROFILES
+        from pf_offboard.app.settings import flight_settings_for
         from pf_offboard.config import load_config
         from pf_offboard.control import PathFollower, controller_from_config
         from pf_offboard.sim.flight import MAX_RATE_HZ
@@ -63,7 +62,7 @@ class _Setup:
             p.write_text(config_yaml, encoding="utf-8")
             config = load_config(p)
         self.config = config
-        fs = flight_settings(config, argparse.Namespace(output=settings.output_mode, end_action=None))
+        fs = flight_settings_for(config, output=settings.output_mode)
         self.flight = fs
         self.rate_hz = settings.rate_hz if settings.rate_hz is not None else min(fs.setpoint_rate_hz, MAX_RATE_HZ)
         self.dt_s = 1.0 / self.rate_hz
