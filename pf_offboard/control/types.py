@@ -342,4 +342,4 @@ class Command:
     lam: float  # path parameter of the closest point
     cross_track_m: float  # distance to the closest point of the path
     saturation: Saturation
-    eta2_ref_m_s: float = math.nan  # the reference speed eta2_ref(eta1) the law tracked this step
+    eta2_ref_m_s: float = math.nan  # the reference speed eta2_ref(eta1) at state.eta1 (with a compensator the measured state's; the law tracked it at the prediction's)

@@ -868,6 +868,10 @@ class BatchFollower:
                 free = (w == 0.0) & ~(res.tangential | res.transversal | tilt | thrust_sat)
                 comp.integrate(t_s, eta2_ref - st.eta2, st.xi1, st.phi1, free)
                 comp.watch(t_s, dist, eta2_ref - st.eta2)
+                # reported at the measured arclength (PathFollower._reference_at)
+                e_m = self.reference(st.eta1)[0]
+                r_m = ramp.speed(st.eta1) if ramp is not None else np.full_like(e_m, math.nan)
+                eta2_ref = np.where(~np.isnan(r_m) & (r_m < np.abs(e_m)), np.copysign(r_m, e_m), e_m)
             a = np.fmod(psi + math.pi, 2.0 * math.pi)
             yaw = np.where(a <= 0.0, a + 2.0 * math.pi, a) - math.pi  # frames.wrap_pi
         return BatchCommand(
