@@ -8,8 +8,11 @@ guard, not a speed target: speed figures live in `pf-offboard bench`.
 
 from __future__ import annotations
 
+import json
+import os
 import signal
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -35,10 +38,12 @@ def _hang_guard() -> Iterator[None]:
         signal.signal(signal.SIGALRM, previous)
 
 
-# The suite's longest files (a minute or so each on 2 cores, measured with --durations), collected
-# first so that `pytest -n auto --dist loadgroup` starts them first instead of leaving one worker
-# running them alone at the end. Order only: every test still runs.
-LONG_FILES = ("test_getting_started.py", "test_installed.py", "test_loss_blackout.py", "test_blackout_rates.py", "test_jitter_rates.py")
+# Each test's measured seconds (tests/durations.json, written by scripts/test_durations.py from a
+# `--durations=0` run): the work units of `--dist loadgroup` (a group, or a test of its own) are
+# queued longest first, so that the last units left are short ones and neither worker idles long
+# at the end while the other finishes a long test. Order only: every test still runs, and a test
+# missing from the file (a new one) just counts as short.
+DURATIONS = Path(__file__).with_name("durations.json")
 # The tests that open the fixed ports of the docs (UDP 14540 / 14580, TCP 5760): one group, so
 # that `--dist loadgroup` runs them one after the other on one worker (they would collide).
 FIXED_PORT_TESTS = ("tests/test_getting_started.py::test_every_command_of_the_guide_runs",
@@ -46,14 +51,50 @@ FIXED_PORT_TESTS = ("tests/test_getting_started.py::test_every_command_of_the_gu
 _WIDE_SCOPES = ("class", "module", "package")
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Keep the queue in the order below: xdist would otherwise sort loadgroup's work units by
+    their number of tests, which says little about their time."""
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False
+
+
+# `-n auto` (the README's command): two workers per core. About a third of the suite's wall time is
+# waiting (real-time flights over loopback, subprocesses), not computing: on 2 cores `-n 2` used
+# ~600 s of CPU in ~470 s (64 % of the cores); a second worker per core computes while the other
+# waits. PYTEST_XDIST_AUTO_NUM_WORKERS still sets the number, `-n N` too.
+WORKERS_PER_CORE = 2
+
+
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return None  # xdist's own hook reads it
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return WORKERS_PER_CORE * cores
+
+
+def _expected_s() -> dict[str, float]:
+    try:
+        data = json.loads(DURATIONS.read_text())
+    except (OSError, ValueError):
+        return {}
+    return {str(k): float(v) for k, v in data.items()} if isinstance(data, dict) else {}
+
+
+def _unit(item: pytest.Item) -> str:
+    """The work unit xdist's loadgroup makes of ``item``: its group(s), or the test alone."""
+    names = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default")) for m in item.iter_markers("xdist_group")})
+    return "@" + "_".join(names) if names else item.nodeid
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The order above, and the groups of `--dist loadgroup` (a test without a group is a work
-    unit of its own, so one long file no longer holds one worker): the fixed-port tests form one
-    group; a test using a class / module scoped fixture (the installed wheel, a fitted log) is
-    grouped with its file, so that fixture is still built once."""
-    rank = {name: i for i, name in enumerate(LONG_FILES)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(LONG_FILES)))  # stable: the rest keep their order
+    """The groups of `--dist loadgroup` (a test without a group is a work unit of its own, so one
+    long file does not hold one worker): the fixed-port tests form one group; a test using a class /
+    module scoped fixture (the installed wheel, a fitted log) is grouped with its file, so that
+    fixture is still built once. Then the order: the units longest first (DURATIONS above)."""
     for item in items:
         if item.get_closest_marker("xdist_group") is not None:
             continue
@@ -64,3 +105,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         defs = info.name2fixturedefs.values() if info is not None else ()
         if any(d.scope in _WIDE_SCOPES for chain in defs for d in chain):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+    expected = _expected_s()
+    unit_of = {item.nodeid: _unit(item) for item in items}
+    cost: dict[str, float] = {}
+    for item in items:
+        cost[unit_of[item.nodeid]] = cost.get(unit_of[item.nodeid], 0.0) + expected.get(item.nodeid, 0.0)
+    items.sort(key=lambda item: -cost[unit_of[item.nodeid]])  # stable: equal units keep their order

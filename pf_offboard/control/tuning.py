@@ -12,6 +12,7 @@ paper's gains (6 Hz / 0.7, 4 Hz / 0.8), which suit an ideal inner loop only.
 from __future__ import annotations
 
 import cmath
+import functools
 import math
 
 from pf_offboard.control.types import Gains, VehicleModel
@@ -124,7 +125,13 @@ def gains_for_vehicle(
         if not (math.isfinite(value) and 10.0 <= value <= 80.0):
             raise InputError(name, f"must be in [10, 80], got {value!r}")
     lag = max(model.accel_lag_xy_s, model.accel_lag_z_s)
-    r = UNMODELLED_DELAY_SHARE * model.accel_delay_s
+    return _gains_for(lag, UNMODELLED_DELAY_SHARE * model.accel_delay_s, float(phase_margin_deg_min), float(tangential_phase_margin_deg_min))
+
+
+# A pure function of four numbers (a few thousand loop evaluations, ~20 ms): every PathFollower and
+# every config with gains: auto asks it, mostly for the same typical vehicle, so it is remembered.
+@functools.lru_cache(maxsize=256)
+def _gains_for(lag: float, r: float, phase_margin_deg_min: float, tangential_phase_margin_deg_min: float) -> Gains:
     pos_plant = _plant(lag, r, 2)
     vel_plant = _plant(lag, r, 1)
     z = TRANSVERSAL_DAMPING
