@@ -18,11 +18,12 @@ from sitl_mock.runner import run_in_thread
 
 from app.flights import run_fly
 
-from .common import SETPOINT_TYPES, hover, is_mode_request, is_safe_setpoint, lockstep, outgoing, write_config
+from .common import SETPOINT_TYPES, entries, hover, is_mode_request, is_safe_setpoint, lockstep, outgoing, write_config
 
 pytestmark = pytest.mark.integration
 
 THRUST_LOSS_AT_S = 3.0
+PX4_OFFBOARD = 6  # PX4's custom main mode in MAV_CMD_DO_SET_MODE's param2
 
 
 def test_coming_down_mid_flight_ends_the_flight_within_1_s_with_exit_6(tmp_path) -> None:
@@ -57,4 +58,16 @@ def test_coming_down_mid_flight_ends_the_flight_within_1_s_with_exit_6(tmp_path)
     # setpoint for that same sample: zero acceleration, seen once on a loaded machine)
     computed = [m for m in after if not is_safe_setpoint(m)]
     assert len(computed) <= 1 and not [m for m in out if m.get_type() in SETPOINT_TYPES and m.time_boot_ms > breach_ms]
-    assert not [m for m in out[-len(after) - 1:] if is_mode_request(m)]
+    # no mode request once the disarm was in: the mock reports the touchdown (EXTENDED_SYS_STATE on
+    # the ground) and the disarm (HEARTBEAT) in either order, as PX4 does; on the ground while armed
+    # is the LANDED breach, whose hold request may go out just before the disarm is read
+    log = entries(tmp_path / "log")
+    first = next(i for i, e in enumerate(log) if e.direction == "out" and e.message.get_type() in SETPOINT_TYPES)
+    disarm = next(i for i, e in enumerate(log) if i > first and e.direction == "in" and e.message.get_type() == "HEARTBEAT"
+                  and e.message.get_srcSystem() == 1 and not e.message.base_mode & 128)  # fmt: skip
+    assert not [e for e in log[disarm:] if e.direction == "out" and is_mode_request(e.message)]
+    on_ground = [i for i, e in enumerate(log) if e.direction == "in" and e.message.get_type() == "EXTENDED_SYS_STATE"
+                 and e.message.landed_state == 1]  # fmt: skip
+    for i, e in enumerate(log[:disarm]):
+        if e.direction == "out" and is_mode_request(e.message) and int(e.message.param2) != PX4_OFFBOARD:
+            assert on_ground and on_ground[0] < i, "a hold requested before the disarm, not answering the touchdown"
