@@ -17,7 +17,8 @@ Its stock body-rate gain ``k_w`` = 1 1/s is a one-second rate loop no attitude l
 
 Judged from rotorpy's true state: the distance to the path and the speed along it from the true
 position's central difference (+-0.1 s), from WINDOW_S on (after the start from hover on the path,
-the start ramp and the integrators' transient). 100 Hz control, 200 Hz physics.
+the start ramp and the integrators' transient). 100 Hz control and 100 Hz physics steps (rotorpy's own
+Environment default; solve_ivp integrates within each step: at 200 Hz the figures agree to 0.3 cm and 0.4 cm/s).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from rotorpy.vehicles.hummingbird_params import quad_params as HUMMINGBIRD  # no
 from rotorpy.vehicles.multirotor import Multirotor  # noqa: E402
 
 G = 9.81
-DT_PHYS_S = 0.005
+DT_PHYS_S = 0.01
 DT_CTRL_S = 0.01
 SPEED_M_S = 1.5
 RATE_GAIN_1_S = 30.0  # rotorpy's k_w for rates output (stock: 1 1/s)
