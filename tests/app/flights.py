@@ -14,7 +14,7 @@ from pf_offboard.app.fly import FlyOutcome, add_arguments, fly
 
 REPO = Path(__file__).resolve().parents[2]
 PAPER = REPO / "configs" / "paper.yaml"
-RATE_HZ = 250.0  # setpoint rate == lockstep step (4 ms): one fresh state sample per setpoint
+RATE_HZ = 100.0  # setpoint rate == lockstep step (10 ms): one fresh state sample per setpoint (the default: 50)
 def write_config(tmp: Path, speed_m_s: float = -1.5, gains: dict | None = None, **flight: object) -> Path:
     data = yaml.safe_load(PAPER.read_text())
     data["speed_m_s"] = speed_m_s

@@ -184,7 +184,7 @@ def test_replay_recomputes_every_setpoint_that_flew(tmp_path, output: str) -> No
     assert outcome.exit_code == 0, outcome.reason
     report = replay_flight(tmp_path / "log" / "flight.tlog", load_config(config))
     print("\n" + "\n".join(report.lines()))
-    assert report.steps == len(outcome.records) > 900
+    assert report.steps == len(outcome.records) > 3.6 * RATE_HZ  # 4 s of steps
     assert report.ok
 
 
@@ -268,6 +268,9 @@ def test_odometry_estimator_reset_ends_following_in_the_hold(tmp_path) -> None:
     assert 5.9 <= last < 6.1 and outcome.breach_time_s is not None and last < outcome.breach_time_s
 
 
+OWN_CLOCK_HZ = 250.0
+
+
 def test_real_time_clock_keeps_up_at_250_hz(tmp_path) -> None:
     """Not lockstep: the mock runs on its own clock like a real autopilot, streaming at 250 Hz of its
     time whether or not the app answers; the app serves the stream and flies. The mock runs at half
@@ -275,7 +278,7 @@ def test_real_time_clock_keeps_up_at_250_hz(tmp_path) -> None:
     wall-clock stall then costs half as much vehicle time, so what is checked (most samples served,
     rates-mode convergence) does not depend on the load. The wall-clock claim at full speed (250 Hz
     answered, latency) is a benchmark figure: `pf-offboard bench --only latency` (answered_fraction)."""
-    config = write_config(tmp_path)
+    config = write_config(tmp_path, setpoint_rate_hz=OWN_CLOCK_HZ)
     cfg = MockConfig(vehicle="fast", profile="px4", spawn=SpawnSpec.parse("hover:" + ",".join(map(str, HOVER_NED))), udp_local_port=0,
                      udp_remote=None, speed=0.5)  # fmt: skip
     with spawn(cfg) as mock:
@@ -285,7 +288,7 @@ def test_real_time_clock_keeps_up_at_250_hz(tmp_path) -> None:
     rate = len(active) / (active[-1].time_s - active[0].time_s)
     print(f"\nown clock: {rate:.0f} steps per vehicle second, converged after {outcome.summary.convergence_time_s} s")
     # Functional, not a speed target: the loop must keep serving most samples to fly at all.
-    assert rate >= 0.5 * RATE_HZ
+    assert rate >= 0.5 * OWN_CLOCK_HZ
     assert outcome.summary.convergence_time_s is not None and outcome.summary.convergence_time_s < 3.0
 
 
