@@ -17,13 +17,13 @@ import pytest
 from sitl_mock.runner import run_in_thread
 
 from app.flights import run_fly
+from pf_offboard.app.profiles import PX4, is_armed
 
 from .common import SETPOINT_TYPES, entries, hover, is_mode_request, is_safe_setpoint, lockstep, outgoing, write_config
 
 pytestmark = pytest.mark.integration
 
 THRUST_LOSS_AT_S = 3.0
-PX4_OFFBOARD = 6  # PX4's custom main mode in MAV_CMD_DO_SET_MODE's param2
 
 
 def test_coming_down_mid_flight_ends_the_flight_within_1_s_with_exit_6(tmp_path) -> None:
@@ -64,10 +64,10 @@ def test_coming_down_mid_flight_ends_the_flight_within_1_s_with_exit_6(tmp_path)
     log = entries(tmp_path / "log")
     first = next(i for i, e in enumerate(log) if e.direction == "out" and e.message.get_type() in SETPOINT_TYPES)
     disarm = next(i for i, e in enumerate(log) if i > first and e.direction == "in" and e.message.get_type() == "HEARTBEAT"
-                  and e.message.get_srcSystem() == 1 and not e.message.base_mode & 128)  # fmt: skip
+                  and e.message.get_srcSystem() == 1 and not is_armed(e.message.base_mode))  # fmt: skip
     assert not [e for e in log[disarm:] if e.direction == "out" and is_mode_request(e.message)]
     on_ground = [i for i, e in enumerate(log) if e.direction == "in" and e.message.get_type() == "EXTENDED_SYS_STATE"
                  and e.message.landed_state == 1]  # fmt: skip
     for i, e in enumerate(log[:disarm]):
-        if e.direction == "out" and is_mode_request(e.message) and int(e.message.param2) != PX4_OFFBOARD:
+        if e.direction == "out" and is_mode_request(e.message) and e.message.param2 != PX4.offboard.param2:
             assert on_ground and on_ground[0] < i, "a hold requested before the disarm, not answering the touchdown"

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pf_offboard.config import FlightConfig
 from pf_offboard.sim.batch.flight import fly, plan_chunks, supported
 from pf_offboard.sweep import plan
 from pf_offboard.sweep.runner import FlightSettings, rows_equal
@@ -17,7 +18,7 @@ from ..helpers import PX4_SIH
 @pytest.mark.parametrize("output", ["acceleration", "attitude", "rates"])
 def test_ardupilot_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(output: str, scalar_flight) -> None:
     # at the default config's 50 Hz (the config's own 100 Hz: tests/sim/batch/test_batch_flight.py)
-    settings = FlightSettings(vehicle="arducopter", autopilot="ardupilot", duration_s=10.0, settle_s=3.0, output_mode=output, rate_hz=50.0)
+    settings = FlightSettings(vehicle="arducopter", autopilot="ardupilot", duration_s=10.0, settle_s=3.0, output_mode=output, rate_hz=FlightConfig().setpoint_rate_hz)
     # acceleration plans within ArduCopter's 30 deg ANGLE_MAX (issue 24): two of its thrown starts
     # crash (as most did at 50 deg, 0 / 10 tracking either way); four keep a flight compared row by row
     flights = 4 if output == "acceleration" else 2

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
+from pf_offboard.config import FlightConfig
 from pf_offboard.sim.batch.flight import fly, plan_chunks, supported
 from pf_offboard.sweep import plan
 from pf_offboard.sweep.runner import FlightSettings, execute, rows_equal
@@ -21,12 +22,14 @@ from pf_offboard.sweep.runner import FlightSettings, execute, rows_equal
 from ..helpers import PX4_SIH, ROOT
 
 PAPER = ROOT / "configs" / "paper.yaml"
+DEFAULT_RATE_HZ = FlightConfig().setpoint_rate_hz  # the default config's 50 Hz (the shipped ones fly 100): half the steps
 
 
 @pytest.mark.parametrize(("vehicle", "output", "flights", "rate_hz"), [
-    ("px4-sih", None, 2, None), ("arducopter", None, 1, 50.0), ("px4-sih", "attitude", 1, 50.0), ("arducopter", "rates", 1, 50.0),
-    ("fast", "rates", 1, 50.0),  # the rates output's attitude reference engages (a fast rate loop): stateful, per flight
-])  # rate_hz: the config's 100 Hz, or the default config's 50 Hz (half the controller's CPU)
+    ("px4-sih", None, 2, None), ("arducopter", None, 1, DEFAULT_RATE_HZ), ("px4-sih", "attitude", 1, DEFAULT_RATE_HZ),
+    ("arducopter", "rates", 1, DEFAULT_RATE_HZ),
+    ("fast", "rates", 1, DEFAULT_RATE_HZ),  # the rates output's attitude reference engages (a fast rate loop): stateful, per flight
+])  # rate_hz None: the config's own 100 Hz
 def test_thrown_flights_follow_the_scalar_trajectories_to_a_micrometre(vehicle: str, output: str | None, flights: int,
                                                                        rate_hz: float | None, scalar_flight) -> None:  # fmt: skip
     settings = FlightSettings(vehicle=vehicle, duration_s=10.0, settle_s=3.0, output_mode=output, rate_hz=rate_hz)
@@ -66,7 +69,7 @@ def _identifying_config(tmp: Path) -> Path:
 ])  # fmt: skip
 def test_flights_that_identify_the_inner_loop_follow_the_scalar_ones(tmp_path: Path, vehicle: str, output: str | None,
                                                                      flights: int, adopts: bool, scalar_flight) -> None:  # fmt: skip
-    settings = FlightSettings(vehicle=vehicle, duration_s=10.0, settle_s=3.0, output_mode=output, rate_hz=50.0)
+    settings = FlightSettings(vehicle=vehicle, duration_s=10.0, settle_s=3.0, output_mode=output, rate_hz=DEFAULT_RATE_HZ)
     tasks = plan.tasks(_identifying_config(tmp_path), plan.SweepSpec(flights=flights, seed=3, settings=settings))
     assert all(supported(t) is None for t in tasks)
     assert max(np.hypot(*t.start.wind_enu_m_s[:2]) for t in tasks) > 0.3  # in wind
@@ -79,7 +82,7 @@ def test_flights_that_identify_the_inner_loop_follow_the_scalar_ones(tmp_path: P
     for k, task in enumerate(tasks):
         scalar_followers: list = []
         scalar, row = scalar_flight(task, scalar_followers)
-        assert len(scalar) == 500
+        assert len(scalar) == 10 * DEFAULT_RATE_HZ
         worst = float(np.max(np.abs(scalar - batch[: len(scalar), :, k])))
         assert worst <= 1e-6, (vehicle, k, worst)
         assert rows_equal([rows[task.key]], [row])
