@@ -32,15 +32,31 @@ def _mav(system: int = 1, component: int = 1) -> mavlink2.MAVLink:
     return mavlink2.MAVLink(None, srcSystem=system, srcComponent=component)
 
 
-async def _settle(link: Link, got: list, until: str, timeout_s: float = 10.0) -> None:
-    """Let the reader run until a message of type ``until`` from the target has been handled (it was
-    sent last: everything before it has been read too), or fail after ``timeout_s``."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout_s
-    while not any(m.get_type() == until for m in got):
-        if loop.time() > deadline:
-            raise AssertionError(f"no {until} handled within {timeout_s} s; counters {link.counters}")
-        await asyncio.sleep(0.001)
+class _Handled(list):
+    """The messages the link handed on (its reader's handler, called on the event loop), with a
+    wait for one of a type instead of polling on the wall clock."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._new = asyncio.Event()
+
+    def append(self, msg) -> None:  # type: ignore[no-untyped-def, override]
+        super().append(msg)
+        self._new.set()
+
+    async def settle(self, link: Link, until: str, timeout_s: float = 10.0) -> None:
+        """Until a message of type ``until`` from the target has been handled (it was sent last:
+        everything before it has been read too), or fail after ``timeout_s``."""
+
+        async def seen() -> None:
+            while not any(m.get_type() == until for m in self):
+                self._new.clear()
+                await self._new.wait()
+
+        try:
+            await asyncio.wait_for(seen(), timeout_s)
+        except TimeoutError:
+            raise AssertionError(f"no {until} handled within {timeout_s} s; counters {link.counters}") from None
 
 
 def test_only_the_target_component_at_the_locked_address_is_believed() -> None:
@@ -54,7 +70,7 @@ def test_only_the_target_component_at_the_locked_address_is_believed() -> None:
         try:
             autopilot.sendto(AUTOPILOT_HB.pack(ap_mav), dest)
             await link.wait_heartbeat(2.0)
-            got: list = []
+            got = _Handled()
             link.start_reading(got.append)
             # the spoofer, from another port, with the autopilot's ids: a GCS HEARTBEAT claiming
             # POSCTL (a fake takeover) and a position 50 m away
@@ -67,7 +83,7 @@ def test_only_the_target_component_at_the_locked_address_is_believed() -> None:
             autopilot.sendto(mavlink2.MAVLink_local_position_ned_message(21, 9.0, 9.0, -9.0, 0, 0, 0).pack(camera_mav), dest)
             autopilot.sendto(mavlink2.MAVLink_local_position_ned_message(22, 1.0, 0.0, -2.0, 0, 0, 0).pack(ap_mav), dest)
             autopilot.sendto(mavlink2.MAVLink_sys_status_message(0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(ap_mav), dest)
-            await _settle(link, got, "SYS_STATUS")
+            await got.settle(link, "SYS_STATUS")
             # udpin answers only the locked peer: the spoofer, who sent datagrams too, gets nothing.
             # sendto on loopback delivers before it returns: once send_heartbeat() is back, anything
             # it sent is already in the receivers' buffers (no waiting needed to see a leak)
@@ -159,11 +175,11 @@ def test_state_that_waited_longer_than_the_state_timeout_is_dropped_unread() -> 
             autopilot.sendto(AUTOPILOT_HB.pack(mav), dest)
             await link.wait_heartbeat(2.0)
             link.max_state_age_s = max_age_s
-            got: list = []
+            got = _Handled()
             autopilot.sendto(mavlink2.MAVLink_local_position_ned_message(30, 1, 2, 3, 0, 0, 0).pack(mav), dest)
             autopilot.sendto(mavlink2.MAVLink_sys_status_message(0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav), dest)
             link.start_reading(got.append)
-            await _settle(link, got, "SYS_STATUS")
+            await got.settle(link, "SYS_STATUS")
             return [m.get_type() for m in got], link.counters
         finally:
             link.close()
