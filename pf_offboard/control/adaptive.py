@@ -144,10 +144,17 @@ class _JointFit:
         self._syv = beta * self._syv + dt * syv
         self._syy = beta * self._syy + dt * syy
         # the drag's and the disturbances' part of the normal equations (shared): Schur complements
-        a22 = self._svv - sum(x * x for x in sv) / w
-        r2 = self._syv - sum(sy[i] * sv[i] for i in range(na)) / w
-        yy0 = self._syy - sum(x * x for x in sy) / w
+        # the sums below add in the order sum() would (0 + the first term is exact)
+        s_vv = s_yv = s_yy = 0.0
+        for i in range(na):
+            s_vv += sv[i] * sv[i]
+            s_yv += sy[i] * sv[i]
+            s_yy += sy[i] * sy[i]
+        a22 = self._svv - s_vv / w
+        r2 = self._syv - s_yv / w
+        yy0 = self._syy - s_yy / w
         g0, rho = self.gain0, self.prior
+        s_uu_k, s_uv_k, s_yu_k = self._suu, self._suv, self._syu
         for k in range(self.n):
             uf, su = self._uf[k], self._su[k]
             suu = suv = syu = 0.0
@@ -156,12 +163,17 @@ class _JointFit:
                 suu += uf[i] * uf[i]
                 suv += uf[i] * pv[i]
                 syu += y[i] * uf[i]
-            self._suu[k] = beta * self._suu[k] + dt * suu
-            self._suv[k] = beta * self._suv[k] + dt * suv
-            self._syu[k] = beta * self._syu[k] + dt * syu
-            a11 = self._suu[k] - sum(x * x for x in su) / w
-            a12 = self._suv[k] - sum(su[i] * sv[i] for i in range(na)) / w
-            r1 = self._syu[k] - sum(sy[i] * su[i] for i in range(na)) / w
+            s_uu_k[k] = beta * s_uu_k[k] + dt * suu
+            s_uv_k[k] = beta * s_uv_k[k] + dt * suv
+            s_yu_k[k] = beta * s_yu_k[k] + dt * syu
+            s_uu = s_uv = s_yu = 0.0
+            for i in range(na):
+                s_uu += su[i] * su[i]
+                s_uv += su[i] * sv[i]
+                s_yu += sy[i] * su[i]
+            a11 = s_uu_k[k] - s_uu / w
+            a12 = s_uv_k[k] - s_uv / w
+            r1 = s_yu_k[k] - s_yu / w
             # (gain, drag) with the prior rho (gain0, 0), then bounded
             b11, b22, c1 = a11 + rho, a22 + rho, r1 + rho * g0
             det = b11 * b22 - a12 * a12
@@ -225,6 +237,7 @@ class ResponseIdentifier:
         self._d = [[0.0, 0.0] for _ in range(n)]
         self._drag = [0.0] * n
         self.score = [0.0] * n
+        self._decays: dict[float, list[tuple[float, float]]] = {}  # step length -> per lag (decay, mean factor)
         self._aj = [[0.0, 0.0] for _ in self.joint]  # the joint candidates' lagged setpoints (unit gain)
         self._fit.reset()
         self.power = 0.0  # low-passed |horizontal setpoint|^2 ((m/s^2)^2)
@@ -300,30 +313,42 @@ class ResponseIdentifier:
         l1, l2 = 2.0 * w * dt, w * w * dt
         c = min(1.0, dt / SCORE_TIME_S)
         g = self.gain
+        lags, decays = self.lags, self._decays
+        if len(decays) > 256:  # the step lengths met so far (a steady rate meets a few): bounded
+            decays.clear()
+        all_a, all_v, all_d, drag, score = self._a, self._v, self._d, self._drag, self.score
+        rate = DRAG_RATE * dt
         for i, delay in enumerate(self.delays):
-            segs = pieces(t_prev, time_s, delay)
-            for j, lag in enumerate(self.lags):
-                k = i * nl + j
-                a, v, d = self._a[k], self._v[k], self._d[k]
-                cd = self._drag[k]
-                for h, sp in segs:
-                    if h <= 0.0:
-                        continue
-                    alpha = math.exp(-h / lag)
-                    m = (lag / h) * (1.0 - alpha)
-                    for ax in (0, 1):
-                        u = g * sp[ax]
-                        mean_a = u + (a[ax] - u) * m
-                        a[ax] = u + (a[ax] - u) * alpha
-                        v[ax] += h * (mean_a + d[ax] - cd * velocity[ax])
-                ex, ey = vx - v[0], vy - v[1]
-                cd -= DRAG_RATE * dt * (ex * vx + ey * vy)
-                self._drag[k] = 0.0 if cd < 0.0 else (MAX_DRAG_1_S if cd > MAX_DRAG_1_S else cd)
-                v[0] += l1 * ex
-                v[1] += l1 * ey
-                d[0] += l2 * ex
-                d[1] += l2 * ey
-                self.score[k] += c * (ex * ex + ey * ey - self.score[k])
+            # the pieces' (h, u_x, u_y) and, per lag, (exp(-h/lag), (lag/h)(1 - exp(-h/lag)))
+            segs = [(h, g * sp[0], g * sp[1]) for h, sp in pieces(t_prev, time_s, delay) if h > 0.0]
+            consts = []
+            for h, _, _ in segs:
+                cs = decays.get(h)
+                if cs is None:
+                    cs = decays[h] = [(a_, (lag / h) * (1.0 - a_)) for lag in lags for a_ in (math.exp(-h / lag),)]
+                consts.append(cs)
+            k = i * nl
+            for j in range(nl):
+                a, v, d = all_a[k], all_v[k], all_d[k]
+                cd = drag[k]
+                a0, a1, v0, v1 = a[0], a[1], v[0], v[1]
+                d0, d1 = d[0], d[1]
+                for (h, u0, u1), cs in zip(segs, consts):
+                    alpha, m = cs[j]
+                    mean_a = u0 + (a0 - u0) * m
+                    a0 = u0 + (a0 - u0) * alpha
+                    v0 += h * (mean_a + d0 - cd * vx)
+                    mean_a = u1 + (a1 - u1) * m
+                    a1 = u1 + (a1 - u1) * alpha
+                    v1 += h * (mean_a + d1 - cd * vy)
+                a[0], a[1] = a0, a1
+                ex, ey = vx - v0, vy - v1
+                cd -= rate * (ex * vx + ey * vy)
+                drag[k] = 0.0 if cd < 0.0 else (MAX_DRAG_1_S if cd > MAX_DRAG_1_S else cd)
+                v[0], v[1] = v0 + l1 * ex, v1 + l1 * ey
+                d[0], d[1] = d0 + l2 * ex, d1 + l2 * ey
+                score[k] += c * (ex * ex + ey * ey - score[k])
+                k += 1
         if self.joint:
             self._joint_update(t_prev, time_s, velocity, pieces)
         self.data_s += dt
