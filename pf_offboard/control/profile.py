@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from pf_offboard.control.feasible import ThrustSet
+from pf_offboard.control.feasible import ThrustSet, _max, _min
 from pf_offboard.control.types import GRAVITY_M_S2, Limits
 from pf_offboard.errors import InputError
 
@@ -221,6 +221,56 @@ class _Feasible:
         self.a_max = spec.max_tangential_accel_m_s2
         self.t = [tuple(r) for r in geo.t_dir.tolist()]
         self.k = [tuple(r) for r in geo.s_ss.tolist()]
+        c = self.inv_share
+        self._kx, self._ky, self._kz = (np.ascontiguousarray(geo.s_ss[:, i]) for i in range(3))
+        self._tx, self._ty, self._tz = (np.ascontiguousarray(geo.t_dir[:, i]) for i in range(3))
+        self._m = (self._tx * c, self._ty * c, self._tz * c)
+
+    def intervals(self, b: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """:meth:`interval` at every grid point i at ``b[i]``: ``(lo, hi, ok)`` (lo, hi meaningless
+        where not ok), equal to the scalar's bit for bit."""
+        c = self.inv_share
+        f0 = (self._kx * b * c, self._ky * b * c, G + self._kz * b * c)
+        lo, hi, empty = self.set.line_intervals(f0, self._m)
+        a_max = self.a_max
+        lo = np.where(-a_max > lo, -a_max, lo)
+        hi = np.where(a_max < hi, a_max, hi)
+        return lo, hi, ~empty & (lo <= hi + _FEASIBLE_TOL)
+
+    def max_bs(self, cap: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`max_b` at every grid point (the same bisection, all points at once)."""
+        ok = self.intervals(cap)[2]
+        lo, hi = np.zeros(len(cap)), cap.copy()
+        for _ in range(32):
+            mid = 0.5 * (lo + hi)
+            feasible = self.intervals(mid)[2]
+            hi = np.where(feasible, hi, mid)
+            lo = np.where(feasible, mid, lo)
+        return np.where(ok, cap, lo)
+
+    def _contains(self, fx: NDArray[np.float64], fy: NDArray[np.float64], fz: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """:meth:`ThrustSet.contains` (tol 0) elementwise (math.hypot, as the scalar)."""
+        ts = self.set
+        h = np.fromiter(map(math.hypot, fx.tolist(), fy.tolist()), float, len(fx))
+        return (fz >= ts.min_thrust_m_s2 - 0.0) & (fx * fx + fy * fy + fz * fz <= (ts.max_thrust_m_s2 + 0.0) ** 2) & (h <= ts.tan_tilt * fz + 0.0)
+
+    def uses(self, b: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`use` at every grid point (the same bisection, all points at once)."""
+        ax, ay, az = self._kx * b + self._tx * a, self._ky * b + self._ty * a, self._kz * b + self._tz * a
+        n = len(b)
+        lo, hi = np.zeros(n), np.ones(n)
+        with np.errstate(all="ignore"):
+            grow = ~self._contains(ax / hi, ay / hi, G + az / hi) & (hi < 64.0)
+            while grow.any():
+                lo = np.where(grow, hi, lo)
+                hi = np.where(grow, 2.0 * hi, hi)
+                grow &= ~self._contains(ax / hi, ay / hi, G + az / hi) & (hi < 64.0)
+            for _ in range(40):
+                mid = 0.5 * (lo + hi)
+                inside = (mid > 0.0) & self._contains(ax / mid, ay / mid, G + az / mid)
+                hi = np.where(inside, mid, hi)
+                lo = np.where(inside, lo, mid)
+        return np.where((b == 0.0) & (a == 0.0), 0.0, hi)
 
     def interval(self, i: int, b: float) -> tuple[float, float] | None:
         """``{A : g e_z + (sigma_ss b + t A) / share in F, |A| <= a_max}`` or None."""
@@ -263,33 +313,52 @@ class _Feasible:
 
 
 def _passes(ub: NDArray[np.float64], feas: _Feasible, ds: float, closed: bool) -> NDArray[np.float64]:
-    """Forward and backward passes: the largest b <= ub with db/ds = 2A, A feasible (point mass)."""
-    b = ub.copy()
-    n = len(b)
+    """Forward and backward passes: the largest b <= ub with db/ds = 2A, A feasible (point mass).
+
+    Sequential; the intervals at the sweep's starting b are evaluated for all points at once and
+    only the points the sweep itself lowered are evaluated again (the same values as evaluating
+    every point in turn)."""
+    bl = ub.tolist()
+    n = len(bl)
+    interval = feas.interval
     for _ in range(4 if closed else 1):
         changed = False
         # forward: what the vehicle can reach accelerating
+        b0 = bl[:]
+        _, his, oks = feas.intervals(np.array(b0))
+        hi0 = np.where(oks, his, 0.0).tolist()
         rng = range(n) if closed else range(n - 1)
         for i in rng:
-            j = (i + 1) % n
-            iv = feas.interval(i, b[i])
-            hi = iv[1] if iv is not None else 0.0
-            lim = b[i] + 2.0 * max(hi, 0.0) * ds
-            if b[j] > lim:
-                b[j] = lim
+            j = i + 1 if i + 1 < n else 0
+            bi = bl[i]
+            if bi == b0[i]:
+                hi = hi0[i]
+            else:
+                iv = interval(i, bi)
+                hi = iv[1] if iv is not None else 0.0
+            lim = bi + 2.0 * max(hi, 0.0) * ds
+            if bl[j] > lim:
+                bl[j] = lim
                 changed = True
         # backward: what it can still stop from
+        b0 = bl[:]
+        los, _, oks = feas.intervals(np.array(b0))
+        lo0 = np.where(oks, los, 0.0).tolist()
         for i in (range(n - 1, -1, -1) if closed else range(n - 2, -1, -1)):
-            j = (i + 1) % n
-            iv = feas.interval(j, b[j])
-            lo = iv[0] if iv is not None else 0.0
-            lim = b[j] - 2.0 * min(lo, 0.0) * ds
-            if b[i] > lim:
-                b[i] = lim
+            j = i + 1 if i + 1 < n else 0
+            bj = bl[j]
+            if bj == b0[j]:
+                lo = lo0[j]
+            else:
+                iv = interval(j, bj)
+                lo = iv[0] if iv is not None else 0.0
+            lim = bj - 2.0 * min(lo, 0.0) * ds
+            if bl[i] > lim:
+                bl[i] = lim
                 changed = True
         if not changed:
             break
-    return np.maximum(b, 0.0)
+    return np.maximum(np.array(bl), 0.0)
 
 
 def _jerk_smooth(
@@ -311,13 +380,10 @@ def _jerk_smooth(
     idx = np.arange(n)
     m = n if closed else n - 1  # intervals
     i0, i1 = idx[:m], (idx[:m] + 1) % n
-    lo = np.empty(m)
-    hi = np.empty(m)
-    for k in range(m):
-        a = feas.interval(int(i0[k]), float(ub[i0[k]]))
-        b = feas.interval(int(i1[k]), float(ub[i1[k]]))
-        lo[k] = max(a[0] if a else 0.0, b[0] if b else 0.0, -feas.a_max)
-        hi[k] = min(a[1] if a else 0.0, b[1] if b else 0.0, feas.a_max)
+    lo_p, hi_p, ok = feas.intervals(ub)
+    lo_p, hi_p = np.where(ok, lo_p, 0.0), np.where(ok, hi_p, 0.0)
+    lo = _max(_max(lo_p[i0], lo_p[i1]), np.full(m, -feas.a_max))
+    hi = _min(_min(hi_p[i0], hi_p[i1]), np.full(m, feas.a_max))
     hi = np.maximum(hi, 0.0)
     lo = np.minimum(lo, 0.0)
     # rows: (b_{i+1} - b_i) <= 2 ds hi ; -(b_{i+1} - b_i) <= -2 ds lo
@@ -398,7 +464,7 @@ def _travel_time(b: NDArray[np.float64], ds: float, closed: bool) -> float:
 
 def _upper_bound(geo: _Geometry, feas: _Feasible, closed: bool) -> NDArray[np.float64]:
     """Pointwise largest feasible b (speed caps, limits; 0 at an open path's end)."""
-    ub = np.array([feas.max_b(i, c) for i, c in enumerate(geo.cap_b.tolist())])
+    ub = feas.max_bs(geo.cap_b)
     if not closed:
         ub[-1] = 0.0
     return ub
@@ -450,7 +516,7 @@ class SpeedProfile:
             min_speed_m_s=float(np.sqrt(max(b.min(), 0.0))),
             max_tangential_accel_m_s2=float(np.abs(a).max()),
             max_tangential_jerk_m_s3=float(np.abs(jerk[moving]).max()) if moving.any() else 0.0,
-            max_accel_use=float(max(feas.use(i, float(bi), float(ai)) for i, (bi, ai) in enumerate(zip(b, a)))),
+            max_accel_use=float(feas.uses(b, a).max()),
             max_tilt_rate_rad_s=float(_tilt_rate(b, geo, closed).max()),
             max_tilt_deg=float(_tilt_deg(b, geo, closed).max()),
         )
@@ -467,11 +533,12 @@ class SpeedProfile:
                 raise InputError("speed_profile", "no jerk-bounded speed profile found (solver failed)")
             b = smooth
             a = (np.roll(b, -1) - b) / (2.0 * ds)
-            bad = []
-            for i in range(len(b) if closed else len(b) - 1):
-                k = (i + 1) % len(b)
-                if not (_within(feas.interval(i, float(b[i])), float(a[i])) and _within(feas.interval(k, float(b[k])), float(a[i]))):
-                    bad.append(i)
+            lo, hi, ok = feas.intervals(b)
+            tol = 1e-6  # _within's
+            inside = ok & (lo - tol <= a) & (a <= hi + tol)  # point i, interval i
+            after = np.roll(ok, -1) & (np.roll(lo, -1) - tol <= a) & (a <= np.roll(hi, -1) + tol)  # point i + 1
+            good = inside & after
+            bad = np.flatnonzero(~(good if closed else good[:-1])).tolist()
             ratio = _tilt_rate(b, geo, closed) / self.spec.max_body_rate_rad_s
             fast = np.flatnonzero(ratio > 1.0)
             if not bad and len(fast) == 0:
