@@ -159,6 +159,21 @@ class ProfileStats(NamedTuple):
 
 
 # ---------------------------------------------------------------------------------- geometry
+class _PathGeometry(NamedTuple):
+    """What the grid needs of the path in one direction of travel (no speed caps): shared by the
+    profiles planned on one path (:class:`SpeedProfile`'s ``like``)."""
+
+    path: Path  # the path it was sampled from (identity checked before reuse)
+    direction: float
+    u: NDArray[np.float64]  # distance travelled at the grid points, m (0 .. L or L - ds)
+    eta1: NDArray[np.float64]  # arclength at the grid points, m
+    t_dir: NDArray[np.float64]  # (n, 3) unit tangent in the direction of travel
+    s_ss: NDArray[np.float64]  # (n, 3) d2 sigma / ds2 (the same in both directions)
+    ds: float
+    s_sss: NDArray[np.float64]  # (n, 3) d3 sigma / ds3 in the direction of travel
+    jerk_norm: NDArray[np.float64]  # (n,) max(|sigma_sss|, 1e-9)
+
+
 class _Geometry(NamedTuple):
     u: NDArray[np.float64]  # distance travelled at the grid points, m (0 .. L or L - ds)
     t_dir: NDArray[np.float64]  # (n, 3) unit tangent in the direction of travel
@@ -167,9 +182,10 @@ class _Geometry(NamedTuple):
     rate_cap_b: NDArray[np.float64]  # (n,) first guess of the body-rate cap squared
     ds: float
     s_sss: NDArray[np.float64]  # (n, 3) d3 sigma / ds3 in the direction of travel
+    path_geo: _PathGeometry
 
 
-def _geometry(path: Path, spec: SpeedProfileSpec, direction: float) -> _Geometry:
+def _path_geometry(path: Path, direction: float) -> _PathGeometry:
     L = float(path.length_m)
     n = int(min(MAX_GRID_POINTS, max(MIN_GRID_POINTS, math.ceil(L / GRID_STEP_M))))
     ds = L / n
@@ -191,13 +207,22 @@ def _geometry(path: Path, spec: SpeedProfileSpec, direction: float) -> _Geometry
     s_sss = (d3 / sn[:, None] ** 3 - 3.0 * d2 * (sprime / sn**4)[:, None]
              + d1 * ((-spp + 3.0 * sprime**2 / sn) / sn**4)[:, None])  # fmt: skip
     t_dir = t if direction >= 0.0 else -t
-    cap = np.full(len(u), spec.max_speed_m_s)
-    # first guess of the body-rate bound: the path's jerk |sigma_sss| V^3 turning f ~ g
     jn = np.maximum(np.linalg.norm(s_sss, axis=1), 1e-9)
-    rate_cap = np.cbrt(spec.max_body_rate_rad_s * G / jn) ** 2
+    return _PathGeometry(path, direction, u, eta1, t_dir, s_ss, ds, s_sss if direction >= 0.0 else -s_sss, jn)
+
+
+def _geometry(path: Path, spec: SpeedProfileSpec, direction: float, path_geo: _PathGeometry | None = None) -> _Geometry:
+    """The grid with the speed caps of ``spec``; ``path_geo``: this path's sampling in this
+    direction already computed (another profile's), else sampled here."""
+    if path_geo is None or path_geo.path is not path or (path_geo.direction >= 0.0) != (direction >= 0.0):
+        path_geo = _path_geometry(path, direction)
+    pg = path_geo
+    cap = np.full(len(pg.u), spec.max_speed_m_s)
+    # first guess of the body-rate bound: the path's jerk |sigma_sss| V^3 turning f ~ g
+    rate_cap = np.cbrt(spec.max_body_rate_rad_s * G / pg.jerk_norm) ** 2
     if spec.table_eta1_m_speed_m_s:
-        cap = np.minimum(cap, _table_speed(spec.table_eta1_m_speed_m_s, eta1, L, closed))
-    return _Geometry(u, t_dir, s_ss, cap * cap, rate_cap, ds, s_sss if direction >= 0.0 else -s_sss)
+        cap = np.minimum(cap, _table_speed(spec.table_eta1_m_speed_m_s, pg.eta1, float(path.length_m), bool(path.closed)))
+    return _Geometry(pg.u, pg.t_dir, pg.s_ss, cap * cap, rate_cap, pg.ds, pg.s_sss, pg)
 
 
 def _table_speed(table: tuple[tuple[float, float], ...], eta1: NDArray[np.float64], L: float, closed: bool) -> NDArray[np.float64]:
@@ -479,9 +504,12 @@ class SpeedProfile:
     to [0, L] (0 at the end travelled towards).
     """
 
-    def __init__(self, path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float, response_s: float = 0.0) -> None:
+    def __init__(self, path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float, response_s: float = 0.0,
+                 like: SpeedProfile | None = None) -> None:  # fmt: skip
         """``response_s``: the inner loop's lag + delay (s; 0: the paper's ideal one), which lowers
-        the share of the limits the reference uses (:func:`response_share`)."""
+        the share of the limits the reference uses (:func:`response_share`). ``like``: a profile
+        planned on the same path whose sampling of the path is reused (the same plan, computed
+        faster; ignored if its path or direction differ)."""
         self.spec = spec
         self.response_s = float(response_s)
         # the jerk the smoothing plans with (see JERK_RATE_SHARE)
@@ -489,7 +517,7 @@ class SpeedProfile:
         self.direction = 1.0 if direction >= 0.0 else -1.0
         self.closed = bool(path.closed)
         self.length_m = float(path.length_m)
-        geo = _geometry(path, spec, self.direction)
+        geo = _geometry(path, spec, self.direction, like._geo.path_geo if like is not None else None)
         feas = _Feasible(geo, limits, spec, self.response_s)
         closed = self.closed
         ub = _upper_bound(geo, feas, closed)
@@ -592,23 +620,26 @@ def _within(iv: tuple[float, float] | None, a: float, tol: float = 1e-6) -> bool
     return iv is not None and iv[0] - tol <= a <= iv[1] + tol
 
 
-def point_mass_lap_time(path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float = 1.0, response_s: float = 0.0) -> float:
+def point_mass_lap_time(path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float = 1.0, response_s: float = 0.0,
+                        like: SpeedProfile | None = None) -> float:  # fmt: skip
     """Travel time (s) of a point mass along the path under the profile's acceleration limits
     (thrust set scaled by ``accel_share``, ``max_tangential_accel``, speed caps) and no jerk bound:
-    the lower bound for any profile with those limits (one lap on a closed path)."""
-    geo = _geometry(path, spec, direction)
+    the lower bound for any profile with those limits (one lap on a closed path). ``like``: as
+    :class:`SpeedProfile`'s."""
+    geo = _geometry(path, spec, direction, like._geo.path_geo if like is not None else None)
     feas = _Feasible(geo, limits, spec, response_s)
     closed = bool(path.closed)
     return _travel_time(_passes(_upper_bound(geo, feas, closed), feas, geo.ds, closed), geo.ds, closed)
 
 
-def vehicle_lap_time_bound(path: Path, limits: Limits, max_speed_m_s: float, direction: float = 1.0) -> float:
+def vehicle_lap_time_bound(path: Path, limits: Limits, max_speed_m_s: float, direction: float = 1.0,
+                           like: SpeedProfile | None = None) -> float:  # fmt: skip
     """The fastest a point mass can travel the path at the vehicle's limits (s; one lap on a closed
     path, start to end on an open one, stopping at the end): speed <= ``max_speed_m_s``, and its
     acceleration ``a`` anywhere such that ``g e_z + a`` is in the thrust set of ``limits`` (tilt, min
     / max thrust), so the tangential and normal accelerations are bounded jointly (on a level path
     ``a_t^2 + a_n^2 <= (g tan(max_tilt))^2``). No share kept for the feedback, no jerk bound, no
     tangential-acceleration bound of the profile's own: the lower bound of any lap flown within
-    those limits (the forward-backward passes of :func:`point_mass_lap_time`)."""
+    those limits (the forward-backward passes of :func:`point_mass_lap_time`; ``like``: as there)."""
     spec = SpeedProfileSpec(max_speed_m_s=min(float(max_speed_m_s), MAX_PROFILE_SPEED_M_S), max_tangential_accel_m_s2=50.0, accel_share=1.0)
-    return point_mass_lap_time(path, spec, limits, direction)
+    return point_mass_lap_time(path, spec, limits, direction, like=like)
