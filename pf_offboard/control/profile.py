@@ -251,27 +251,34 @@ class _Feasible:
         self._tx, self._ty, self._tz = (np.ascontiguousarray(geo.t_dir[:, i]) for i in range(3))
         self._m = (self._tx * c, self._ty * c, self._tz * c)
 
-    def intervals(self, b: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-        """:meth:`interval` at every grid point i at ``b[i]``: ``(lo, hi, ok)`` (lo, hi meaningless
-        where not ok), equal to the scalar's bit for bit."""
+    def intervals(self, b: NDArray[np.float64], idx: NDArray[np.intp] | None = None
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:  # fmt: skip
+        """:meth:`interval` at every grid point i at ``b[i]`` (or at the points ``idx``, ``b`` then
+        of their length): ``(lo, hi, ok)`` (lo, hi meaningless where not ok), equal to the
+        scalar's bit for bit."""
         c = self.inv_share
-        f0 = (self._kx * b * c, self._ky * b * c, G + self._kz * b * c)
-        lo, hi, empty = self.set.line_intervals(f0, self._m)
+        kx, ky, kz = (self._kx, self._ky, self._kz) if idx is None else (self._kx[idx], self._ky[idx], self._kz[idx])
+        m = self._m if idx is None else (self._m[0][idx], self._m[1][idx], self._m[2][idx])
+        lo, hi, empty = self.set.line_intervals((kx * b * c, ky * b * c, G + kz * b * c), m)
         a_max = self.a_max
         lo = np.where(-a_max > lo, -a_max, lo)
         hi = np.where(a_max < hi, a_max, hi)
         return lo, hi, ~empty & (lo <= hi + _FEASIBLE_TOL)
 
     def max_bs(self, cap: NDArray[np.float64]) -> NDArray[np.float64]:
-        """:meth:`max_b` at every grid point (the same bisection, all points at once)."""
-        ok = self.intervals(cap)[2]
-        lo, hi = np.zeros(len(cap)), cap.copy()
+        """:meth:`max_b` at every grid point (the same bisection, the points below their cap at once)."""
+        out = cap.copy()
+        idx = np.flatnonzero(~self.intervals(cap)[2])
+        if len(idx) == 0:
+            return out
+        lo, hi = np.zeros(len(idx)), cap[idx]
         for _ in range(32):
             mid = 0.5 * (lo + hi)
-            feasible = self.intervals(mid)[2]
+            feasible = self.intervals(mid, idx)[2]
             hi = np.where(feasible, hi, mid)
             lo = np.where(feasible, mid, lo)
-        return np.where(ok, cap, lo)
+        out[idx] = lo
+        return out
 
     def _contains(self, fx: NDArray[np.float64], fy: NDArray[np.float64], fz: NDArray[np.float64]) -> NDArray[np.bool_]:
         """:meth:`ThrustSet.contains` (tol 0) elementwise (math.hypot, as the scalar)."""
