@@ -34,6 +34,8 @@ everything (activation, estimator reset, a gap in the telemetry).
 
 from __future__ import annotations
 
+import bisect
+import itertools
 import math
 from collections import deque
 from collections.abc import Callable
@@ -300,14 +302,15 @@ class InnerLoopCompensator:
     def _pieces(self, t0: float, t1: float, delay: float) -> list[tuple[float, Vec]]:
         """Setpoints acting on the vehicle over (t0, t1] as (duration_s, a_sp ENU) pieces: the one
         recorded at s acts from s + delay on (zero-order hold; before any setpoint: hover, 0)."""
-        cur: Vec = _ZERO
+        sent = self._sent
+        # the recorded times never decrease, so neither does ts + delay: skip the ones acting by t0
+        # (bisection, the same test as one by one)
+        k = bisect.bisect_right(sent, t0 + 1e-9, key=lambda e: e[0] + delay)
+        cur: Vec = sent[k - 1][1] if k > 0 else _ZERO
         out: list[tuple[float, Vec]] = []
         tau = t0
-        for ts, a in self._sent:
+        for ts, a in itertools.islice(sent, k, None):
             t_on = ts + delay
-            if t_on <= t0 + 1e-9:
-                cur = a
-                continue
             if t_on >= t1:
                 break
             out.append((t_on - tau, cur))

@@ -11,7 +11,11 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numpy as np
+from numpy.typing import NDArray
+
 Vec = tuple[float, float, float]
+Arr = NDArray[np.float64]
 _INF = math.inf
 
 
@@ -97,6 +101,61 @@ class ThrustSet(NamedTuple):
             return None
         return lo, hi
 
+    def line_intervals(self, f0: tuple[Arr, Arr, Arr], m: tuple[Arr, Arr, Arr]) -> tuple[Arr, Arr, NDArray[np.bool_]]:
+        """:meth:`line_interval` for many lines at once (component arrays of equal shape):
+        ``(lo, hi, empty)``, ``empty`` where the scalar gives None (lo, hi are then meaningless).
+        The same operations in the same order, so the bounds equal the scalar's bit for bit."""
+        with np.errstate(all="ignore"):
+            return self._line_intervals(f0, m)
+
+    def _line_intervals(self, f0: tuple[Arr, Arr, Arr], m: tuple[Arr, Arr, Arr]) -> tuple[Arr, Arr, NDArray[np.bool_]]:
+        fx, fy, fz = f0
+        mx, my, mz = m
+        lo = np.full(np.shape(fz), -_INF)
+        hi = np.full(np.shape(fz), _INF)
+        gap = self.min_thrust_m_s2 - fz
+        q = gap / mz
+        lo = np.where(mz > 0.0, q, lo)
+        hi = np.where(mz < 0.0, q, hi)
+        empty = (mz == 0.0) & (gap > 0.0)
+        # |f0 + s m|^2 <= T_max^2
+        a = mx * mx + my * my + mz * mz
+        b = fx * mx + fy * my + fz * mz
+        c = fx * fx + fy * fy + fz * fz - self.max_thrust_m_s2 * self.max_thrust_m_s2
+        flat = a <= 0.0
+        empty |= flat & (c > 0.0)
+        disc = b * b - a * c
+        empty |= ~flat & (disc < 0.0)
+        use = ~flat & (disc >= 0.0)
+        r1, r2 = _roots_v(a, b, c, np.sqrt(disc))
+        lo = np.where(use, _max(lo, r1), lo)
+        hi = np.where(use, _min(hi, r2), hi)
+        # the tilt cone
+        t2 = self.tan_tilt * self.tan_tilt
+        a = t2 * mz * mz - (mx * mx + my * my)
+        b = t2 * fz * mz - (fx * mx + fy * my)
+        c = t2 * fz * fz - (fx * fx + fy * fy)
+        aa, ab, ac = np.abs(a), np.abs(b), np.abs(c)
+        scale = _max(_max(_max(aa, ab), ac), np.full(np.shape(a), 1e-300))
+        lin = aa <= 1e-14 * scale
+        root = -c / (2.0 * b)
+        lo = np.where(lin & (b > 0.0), _max(lo, root), lo)
+        hi = np.where(lin & (b < 0.0), _min(hi, root), hi)
+        empty |= lin & (b == 0.0) & (c < 0.0)
+        disc = b * b - a * c
+        cross = ~lin & (a < 0.0)
+        empty |= cross & (disc < 0.0)
+        inside = ~lin & (a > 0.0) & (disc > 0.0)
+        r1, r2 = _roots_v(a, b, c, np.sqrt(disc))
+        c_use = cross & (disc >= 0.0)
+        lo = np.where(c_use, _max(lo, r1), lo)
+        hi = np.where(c_use, _min(hi, r2), hi)
+        up = mz > 0.0
+        lo = np.where(inside & up, _max(lo, r2), lo)
+        hi = np.where(inside & ~up, _min(hi, r1), hi)
+        empty |= lo > hi
+        return lo, hi, empty
+
     def clip(self, f: Vec) -> Vec:
         """A feasible thrust vector near ``f`` (keeps its horizontal direction): the last safety net."""
         fx, fy, fz = f
@@ -135,3 +194,25 @@ def _roots(a: float, b: float, c: float, sq: float) -> tuple[float, float]:
     r1 = q / a
     r2 = c / q
     return (r1, r2) if r1 <= r2 else (r2, r1)
+
+
+def _max(x: Arr, y: Arr) -> Arr:
+    """Python's ``max(x, y)`` elementwise (y only where it is greater: keeps x's sign of zero)."""
+    return np.where(y > x, y, x)
+
+
+def _min(x: Arr, y: Arr) -> Arr:
+    """Python's ``min(x, y)`` elementwise."""
+    return np.where(y < x, y, x)
+
+
+def _roots_v(a: Arr, b: Arr, c: Arr, sq: Arr) -> tuple[Arr, Arr]:
+    """:func:`_roots` elementwise."""
+    q = np.where(b >= 0.0, -(b + sq), -(b - sq))
+    zero = q == 0.0
+    r1 = q / a
+    r2 = c / q
+    swap = ~(r1 <= r2)
+    lo = np.where(swap, r2, r1)
+    hi = np.where(swap, r1, r2)
+    return np.where(zero, 0.0, lo), np.where(zero, 0.0, hi)

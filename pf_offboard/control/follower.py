@@ -318,7 +318,7 @@ class PathFollower:
         self.limits = limits
         self.law = ControlLaw(self.gains, self.limits)
         if self._speed_profile_spec is not None:
-            self.profile = SpeedProfile(self.path, self._speed_profile_spec, self.limits, self.speed, self._response_s)
+            self.profile = SpeedProfile(self.path, self._speed_profile_spec, self.limits, self.speed, self._response_s, like=self.profile)
             self.identified_profile = self._identified_profile()
 
     def _replans(self, identified: Any) -> bool:
@@ -338,7 +338,7 @@ class PathFollower:
         response_s = max(self.vehicle.accel_lag_xy_s, self.vehicle.accel_lag_z_s)
         if response_s >= self._response_s:
             return None
-        return SpeedProfile(self.path, spec, self.limits, self.speed, response_s)
+        return SpeedProfile(self.path, spec, self.limits, self.speed, response_s, like=self.profile)
 
     @classmethod
     def paper(
@@ -404,7 +404,7 @@ class PathFollower:
         start to end): the largest speed it flies (the speed profile's ``max_speed_m_s``, else
         ``|speed|``) and the thrust set of :attr:`limits` (:func:`~pf_offboard.control.profile.vehicle_lap_time_bound`)."""
         v = self.profile.spec.max_speed_m_s if self.profile is not None else abs(self.speed)
-        return vehicle_lap_time_bound(self.path, self.limits, v, self.speed)
+        return vehicle_lap_time_bound(self.path, self.limits, v, self.speed, like=self.profile)
 
     # ------------------------------------------------------------------ control
     def reference_speed(self, eta1: float) -> float:

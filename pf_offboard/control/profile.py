@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from pf_offboard.control.feasible import ThrustSet
+from pf_offboard.control.feasible import ThrustSet, _max, _min
 from pf_offboard.control.types import GRAVITY_M_S2, Limits
 from pf_offboard.errors import InputError
 
@@ -159,6 +159,21 @@ class ProfileStats(NamedTuple):
 
 
 # ---------------------------------------------------------------------------------- geometry
+class _PathGeometry(NamedTuple):
+    """What the grid needs of the path in one direction of travel (no speed caps): shared by the
+    profiles planned on one path (:class:`SpeedProfile`'s ``like``)."""
+
+    path: Path  # the path it was sampled from (identity checked before reuse)
+    direction: float
+    u: NDArray[np.float64]  # distance travelled at the grid points, m (0 .. L or L - ds)
+    eta1: NDArray[np.float64]  # arclength at the grid points, m
+    t_dir: NDArray[np.float64]  # (n, 3) unit tangent in the direction of travel
+    s_ss: NDArray[np.float64]  # (n, 3) d2 sigma / ds2 (the same in both directions)
+    ds: float
+    s_sss: NDArray[np.float64]  # (n, 3) d3 sigma / ds3 in the direction of travel
+    jerk_norm: NDArray[np.float64]  # (n,) max(|sigma_sss|, 1e-9)
+
+
 class _Geometry(NamedTuple):
     u: NDArray[np.float64]  # distance travelled at the grid points, m (0 .. L or L - ds)
     t_dir: NDArray[np.float64]  # (n, 3) unit tangent in the direction of travel
@@ -167,9 +182,10 @@ class _Geometry(NamedTuple):
     rate_cap_b: NDArray[np.float64]  # (n,) first guess of the body-rate cap squared
     ds: float
     s_sss: NDArray[np.float64]  # (n, 3) d3 sigma / ds3 in the direction of travel
+    path_geo: _PathGeometry
 
 
-def _geometry(path: Path, spec: SpeedProfileSpec, direction: float) -> _Geometry:
+def _path_geometry(path: Path, direction: float) -> _PathGeometry:
     L = float(path.length_m)
     n = int(min(MAX_GRID_POINTS, max(MIN_GRID_POINTS, math.ceil(L / GRID_STEP_M))))
     ds = L / n
@@ -191,13 +207,22 @@ def _geometry(path: Path, spec: SpeedProfileSpec, direction: float) -> _Geometry
     s_sss = (d3 / sn[:, None] ** 3 - 3.0 * d2 * (sprime / sn**4)[:, None]
              + d1 * ((-spp + 3.0 * sprime**2 / sn) / sn**4)[:, None])  # fmt: skip
     t_dir = t if direction >= 0.0 else -t
-    cap = np.full(len(u), spec.max_speed_m_s)
-    # first guess of the body-rate bound: the path's jerk |sigma_sss| V^3 turning f ~ g
     jn = np.maximum(np.linalg.norm(s_sss, axis=1), 1e-9)
-    rate_cap = np.cbrt(spec.max_body_rate_rad_s * G / jn) ** 2
+    return _PathGeometry(path, direction, u, eta1, t_dir, s_ss, ds, s_sss if direction >= 0.0 else -s_sss, jn)
+
+
+def _geometry(path: Path, spec: SpeedProfileSpec, direction: float, path_geo: _PathGeometry | None = None) -> _Geometry:
+    """The grid with the speed caps of ``spec``; ``path_geo``: this path's sampling in this
+    direction already computed (another profile's), else sampled here."""
+    if path_geo is None or path_geo.path is not path or (path_geo.direction >= 0.0) != (direction >= 0.0):
+        path_geo = _path_geometry(path, direction)
+    pg = path_geo
+    cap = np.full(len(pg.u), spec.max_speed_m_s)
+    # first guess of the body-rate bound: the path's jerk |sigma_sss| V^3 turning f ~ g
+    rate_cap = np.cbrt(spec.max_body_rate_rad_s * G / pg.jerk_norm) ** 2
     if spec.table_eta1_m_speed_m_s:
-        cap = np.minimum(cap, _table_speed(spec.table_eta1_m_speed_m_s, eta1, L, closed))
-    return _Geometry(u, t_dir, s_ss, cap * cap, rate_cap, ds, s_sss if direction >= 0.0 else -s_sss)
+        cap = np.minimum(cap, _table_speed(spec.table_eta1_m_speed_m_s, pg.eta1, float(path.length_m), bool(path.closed)))
+    return _Geometry(pg.u, pg.t_dir, pg.s_ss, cap * cap, rate_cap, pg.ds, pg.s_sss, pg)
 
 
 def _table_speed(table: tuple[tuple[float, float], ...], eta1: NDArray[np.float64], L: float, closed: bool) -> NDArray[np.float64]:
@@ -221,6 +246,63 @@ class _Feasible:
         self.a_max = spec.max_tangential_accel_m_s2
         self.t = [tuple(r) for r in geo.t_dir.tolist()]
         self.k = [tuple(r) for r in geo.s_ss.tolist()]
+        c = self.inv_share
+        self._kx, self._ky, self._kz = (np.ascontiguousarray(geo.s_ss[:, i]) for i in range(3))
+        self._tx, self._ty, self._tz = (np.ascontiguousarray(geo.t_dir[:, i]) for i in range(3))
+        self._m = (self._tx * c, self._ty * c, self._tz * c)
+
+    def intervals(self, b: NDArray[np.float64], idx: NDArray[np.intp] | None = None
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:  # fmt: skip
+        """:meth:`interval` at every grid point i at ``b[i]`` (or at the points ``idx``, ``b`` then
+        of their length): ``(lo, hi, ok)`` (lo, hi meaningless where not ok), equal to the
+        scalar's bit for bit."""
+        c = self.inv_share
+        kx, ky, kz = (self._kx, self._ky, self._kz) if idx is None else (self._kx[idx], self._ky[idx], self._kz[idx])
+        m = self._m if idx is None else (self._m[0][idx], self._m[1][idx], self._m[2][idx])
+        lo, hi, empty = self.set.line_intervals((kx * b * c, ky * b * c, G + kz * b * c), m)
+        a_max = self.a_max
+        lo = np.where(-a_max > lo, -a_max, lo)
+        hi = np.where(a_max < hi, a_max, hi)
+        return lo, hi, ~empty & (lo <= hi + _FEASIBLE_TOL)
+
+    def max_bs(self, cap: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`max_b` at every grid point (the same bisection, the points below their cap at once)."""
+        out = cap.copy()
+        idx = np.flatnonzero(~self.intervals(cap)[2])
+        if len(idx) == 0:
+            return out
+        lo, hi = np.zeros(len(idx)), cap[idx]
+        for _ in range(32):
+            mid = 0.5 * (lo + hi)
+            feasible = self.intervals(mid, idx)[2]
+            hi = np.where(feasible, hi, mid)
+            lo = np.where(feasible, mid, lo)
+        out[idx] = lo
+        return out
+
+    def _contains(self, fx: NDArray[np.float64], fy: NDArray[np.float64], fz: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """:meth:`ThrustSet.contains` (tol 0) elementwise (math.hypot, as the scalar)."""
+        ts = self.set
+        h = np.fromiter(map(math.hypot, fx.tolist(), fy.tolist()), float, len(fx))
+        return (fz >= ts.min_thrust_m_s2 - 0.0) & (fx * fx + fy * fy + fz * fz <= (ts.max_thrust_m_s2 + 0.0) ** 2) & (h <= ts.tan_tilt * fz + 0.0)
+
+    def uses(self, b: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`use` at every grid point (the same bisection, all points at once)."""
+        ax, ay, az = self._kx * b + self._tx * a, self._ky * b + self._ty * a, self._kz * b + self._tz * a
+        n = len(b)
+        lo, hi = np.zeros(n), np.ones(n)
+        with np.errstate(all="ignore"):
+            grow = ~self._contains(ax / hi, ay / hi, G + az / hi) & (hi < 64.0)
+            while grow.any():
+                lo = np.where(grow, hi, lo)
+                hi = np.where(grow, 2.0 * hi, hi)
+                grow &= ~self._contains(ax / hi, ay / hi, G + az / hi) & (hi < 64.0)
+            for _ in range(40):
+                mid = 0.5 * (lo + hi)
+                inside = (mid > 0.0) & self._contains(ax / mid, ay / mid, G + az / mid)
+                hi = np.where(inside, mid, hi)
+                lo = np.where(inside, lo, mid)
+        return np.where((b == 0.0) & (a == 0.0), 0.0, hi)
 
     def interval(self, i: int, b: float) -> tuple[float, float] | None:
         """``{A : g e_z + (sigma_ss b + t A) / share in F, |A| <= a_max}`` or None."""
@@ -263,33 +345,52 @@ class _Feasible:
 
 
 def _passes(ub: NDArray[np.float64], feas: _Feasible, ds: float, closed: bool) -> NDArray[np.float64]:
-    """Forward and backward passes: the largest b <= ub with db/ds = 2A, A feasible (point mass)."""
-    b = ub.copy()
-    n = len(b)
+    """Forward and backward passes: the largest b <= ub with db/ds = 2A, A feasible (point mass).
+
+    Sequential; the intervals at the sweep's starting b are evaluated for all points at once and
+    only the points the sweep itself lowered are evaluated again (the same values as evaluating
+    every point in turn)."""
+    bl = ub.tolist()
+    n = len(bl)
+    interval = feas.interval
     for _ in range(4 if closed else 1):
         changed = False
         # forward: what the vehicle can reach accelerating
+        b0 = bl[:]
+        _, his, oks = feas.intervals(np.array(b0))
+        hi0 = np.where(oks, his, 0.0).tolist()
         rng = range(n) if closed else range(n - 1)
         for i in rng:
-            j = (i + 1) % n
-            iv = feas.interval(i, b[i])
-            hi = iv[1] if iv is not None else 0.0
-            lim = b[i] + 2.0 * max(hi, 0.0) * ds
-            if b[j] > lim:
-                b[j] = lim
+            j = i + 1 if i + 1 < n else 0
+            bi = bl[i]
+            if bi == b0[i]:
+                hi = hi0[i]
+            else:
+                iv = interval(i, bi)
+                hi = iv[1] if iv is not None else 0.0
+            lim = bi + 2.0 * max(hi, 0.0) * ds
+            if bl[j] > lim:
+                bl[j] = lim
                 changed = True
         # backward: what it can still stop from
+        b0 = bl[:]
+        los, _, oks = feas.intervals(np.array(b0))
+        lo0 = np.where(oks, los, 0.0).tolist()
         for i in (range(n - 1, -1, -1) if closed else range(n - 2, -1, -1)):
-            j = (i + 1) % n
-            iv = feas.interval(j, b[j])
-            lo = iv[0] if iv is not None else 0.0
-            lim = b[j] - 2.0 * min(lo, 0.0) * ds
-            if b[i] > lim:
-                b[i] = lim
+            j = i + 1 if i + 1 < n else 0
+            bj = bl[j]
+            if bj == b0[j]:
+                lo = lo0[j]
+            else:
+                iv = interval(j, bj)
+                lo = iv[0] if iv is not None else 0.0
+            lim = bj - 2.0 * min(lo, 0.0) * ds
+            if bl[i] > lim:
+                bl[i] = lim
                 changed = True
         if not changed:
             break
-    return np.maximum(b, 0.0)
+    return np.maximum(np.array(bl), 0.0)
 
 
 def _jerk_smooth(
@@ -311,13 +412,10 @@ def _jerk_smooth(
     idx = np.arange(n)
     m = n if closed else n - 1  # intervals
     i0, i1 = idx[:m], (idx[:m] + 1) % n
-    lo = np.empty(m)
-    hi = np.empty(m)
-    for k in range(m):
-        a = feas.interval(int(i0[k]), float(ub[i0[k]]))
-        b = feas.interval(int(i1[k]), float(ub[i1[k]]))
-        lo[k] = max(a[0] if a else 0.0, b[0] if b else 0.0, -feas.a_max)
-        hi[k] = min(a[1] if a else 0.0, b[1] if b else 0.0, feas.a_max)
+    lo_p, hi_p, ok = feas.intervals(ub)
+    lo_p, hi_p = np.where(ok, lo_p, 0.0), np.where(ok, hi_p, 0.0)
+    lo = _max(_max(lo_p[i0], lo_p[i1]), np.full(m, -feas.a_max))
+    hi = _min(_min(hi_p[i0], hi_p[i1]), np.full(m, feas.a_max))
     hi = np.maximum(hi, 0.0)
     lo = np.minimum(lo, 0.0)
     # rows: (b_{i+1} - b_i) <= 2 ds hi ; -(b_{i+1} - b_i) <= -2 ds lo
@@ -398,7 +496,7 @@ def _travel_time(b: NDArray[np.float64], ds: float, closed: bool) -> float:
 
 def _upper_bound(geo: _Geometry, feas: _Feasible, closed: bool) -> NDArray[np.float64]:
     """Pointwise largest feasible b (speed caps, limits; 0 at an open path's end)."""
-    ub = np.array([feas.max_b(i, c) for i, c in enumerate(geo.cap_b.tolist())])
+    ub = feas.max_bs(geo.cap_b)
     if not closed:
         ub[-1] = 0.0
     return ub
@@ -413,9 +511,12 @@ class SpeedProfile:
     to [0, L] (0 at the end travelled towards).
     """
 
-    def __init__(self, path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float, response_s: float = 0.0) -> None:
+    def __init__(self, path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float, response_s: float = 0.0,
+                 like: SpeedProfile | None = None) -> None:  # fmt: skip
         """``response_s``: the inner loop's lag + delay (s; 0: the paper's ideal one), which lowers
-        the share of the limits the reference uses (:func:`response_share`)."""
+        the share of the limits the reference uses (:func:`response_share`). ``like``: a profile
+        planned on the same path whose sampling of the path is reused (the same plan, computed
+        faster; ignored if its path or direction differ)."""
         self.spec = spec
         self.response_s = float(response_s)
         # the jerk the smoothing plans with (see JERK_RATE_SHARE)
@@ -423,7 +524,7 @@ class SpeedProfile:
         self.direction = 1.0 if direction >= 0.0 else -1.0
         self.closed = bool(path.closed)
         self.length_m = float(path.length_m)
-        geo = _geometry(path, spec, self.direction)
+        geo = _geometry(path, spec, self.direction, like._geo.path_geo if like is not None else None)
         feas = _Feasible(geo, limits, spec, self.response_s)
         closed = self.closed
         ub = _upper_bound(geo, feas, closed)
@@ -450,7 +551,7 @@ class SpeedProfile:
             min_speed_m_s=float(np.sqrt(max(b.min(), 0.0))),
             max_tangential_accel_m_s2=float(np.abs(a).max()),
             max_tangential_jerk_m_s3=float(np.abs(jerk[moving]).max()) if moving.any() else 0.0,
-            max_accel_use=float(max(feas.use(i, float(bi), float(ai)) for i, (bi, ai) in enumerate(zip(b, a)))),
+            max_accel_use=float(feas.uses(b, a).max()),
             max_tilt_rate_rad_s=float(_tilt_rate(b, geo, closed).max()),
             max_tilt_deg=float(_tilt_deg(b, geo, closed).max()),
         )
@@ -467,11 +568,12 @@ class SpeedProfile:
                 raise InputError("speed_profile", "no jerk-bounded speed profile found (solver failed)")
             b = smooth
             a = (np.roll(b, -1) - b) / (2.0 * ds)
-            bad = []
-            for i in range(len(b) if closed else len(b) - 1):
-                k = (i + 1) % len(b)
-                if not (_within(feas.interval(i, float(b[i])), float(a[i])) and _within(feas.interval(k, float(b[k])), float(a[i]))):
-                    bad.append(i)
+            lo, hi, ok = feas.intervals(b)
+            tol = 1e-6  # _within's
+            inside = ok & (lo - tol <= a) & (a <= hi + tol)  # point i, interval i
+            after = np.roll(ok, -1) & (np.roll(lo, -1) - tol <= a) & (a <= np.roll(hi, -1) + tol)  # point i + 1
+            good = inside & after
+            bad = np.flatnonzero(~(good if closed else good[:-1])).tolist()
             ratio = _tilt_rate(b, geo, closed) / self.spec.max_body_rate_rad_s
             fast = np.flatnonzero(ratio > 1.0)
             if not bad and len(fast) == 0:
@@ -525,23 +627,26 @@ def _within(iv: tuple[float, float] | None, a: float, tol: float = 1e-6) -> bool
     return iv is not None and iv[0] - tol <= a <= iv[1] + tol
 
 
-def point_mass_lap_time(path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float = 1.0, response_s: float = 0.0) -> float:
+def point_mass_lap_time(path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float = 1.0, response_s: float = 0.0,
+                        like: SpeedProfile | None = None) -> float:  # fmt: skip
     """Travel time (s) of a point mass along the path under the profile's acceleration limits
     (thrust set scaled by ``accel_share``, ``max_tangential_accel``, speed caps) and no jerk bound:
-    the lower bound for any profile with those limits (one lap on a closed path)."""
-    geo = _geometry(path, spec, direction)
+    the lower bound for any profile with those limits (one lap on a closed path). ``like``: as
+    :class:`SpeedProfile`'s."""
+    geo = _geometry(path, spec, direction, like._geo.path_geo if like is not None else None)
     feas = _Feasible(geo, limits, spec, response_s)
     closed = bool(path.closed)
     return _travel_time(_passes(_upper_bound(geo, feas, closed), feas, geo.ds, closed), geo.ds, closed)
 
 
-def vehicle_lap_time_bound(path: Path, limits: Limits, max_speed_m_s: float, direction: float = 1.0) -> float:
+def vehicle_lap_time_bound(path: Path, limits: Limits, max_speed_m_s: float, direction: float = 1.0,
+                           like: SpeedProfile | None = None) -> float:  # fmt: skip
     """The fastest a point mass can travel the path at the vehicle's limits (s; one lap on a closed
     path, start to end on an open one, stopping at the end): speed <= ``max_speed_m_s``, and its
     acceleration ``a`` anywhere such that ``g e_z + a`` is in the thrust set of ``limits`` (tilt, min
     / max thrust), so the tangential and normal accelerations are bounded jointly (on a level path
     ``a_t^2 + a_n^2 <= (g tan(max_tilt))^2``). No share kept for the feedback, no jerk bound, no
     tangential-acceleration bound of the profile's own: the lower bound of any lap flown within
-    those limits (the forward-backward passes of :func:`point_mass_lap_time`)."""
+    those limits (the forward-backward passes of :func:`point_mass_lap_time`; ``like``: as there)."""
     spec = SpeedProfileSpec(max_speed_m_s=min(float(max_speed_m_s), MAX_PROFILE_SPEED_M_S), max_tangential_accel_m_s2=50.0, accel_share=1.0)
-    return point_mass_lap_time(path, spec, limits, direction)
+    return point_mass_lap_time(path, spec, limits, direction, like=like)
