@@ -4,8 +4,9 @@ never recovered: the law gave all of the tilt to the correction across the path,
 brake, and the overspeed kept the turn's demand (v^2 / R, R 1.25 m) over the 45 deg limit: a limit
 cycle, 38 cm RMS. The mock reproduces it with a throw along the helix at 4 m/s, 25 cm inside it,
 engaged at once. From 3 to 12 s after the activation, without the reserve: 41-42 cm RMS as the
-controller sees it, 43-45 cm (max 73-78) true; with it 2.6-3.3 cm seen, 13-18 cm (max 22-36) true:
-the px4-sih preset's estimate wanders like EKF2's on SIH, which the truth adds."""
+controller sees it, 43-45 cm (max 73-78) true; with the reserve gated on an overspeed of 0.25 m/s
+(seeds 6 / 7) 6.7 / 8.9 cm seen, 13.5 / 20.6 cm (max 37 / 36) true (ungated: 2.6-3.3 seen): the
+px4-sih preset's estimate wanders like EKF2's on SIH, which the truth adds."""
 
 from __future__ import annotations
 
@@ -47,4 +48,4 @@ def test_an_overspeed_inside_the_helix_is_braked_out_of_the_limit_cycle(tmp_path
     print(f"\nseed {seed}: 3-12 s after activation: true cross-track RMS {100 * rms:.1f} cm, max {100 * worst:.1f} cm; "
           f"the estimate's RMS {100 * seen_rms:.1f} cm")  # fmt: skip
     assert win.sum() > 400
-    assert rms <= 0.22 and worst <= 0.45 and seen_rms <= 0.08
+    assert rms <= 0.25 and worst <= 0.45 and seen_rms <= 0.12  # the cycle: 41-42 cm seen
