@@ -70,7 +70,9 @@ def test_a_bad_adoption_is_rolled_back(tmp_path: Path, monkeypatch: pytest.Monke
           f"from activation + 8 s {100 * m.cross_track_rms_m:.1f} cm RMS, max after the adoption {100 * cross[after].max():.1f} cm")  # fmt: skip
     assert not f.crashed and f.time_s[-1] >= 29.9
     assert m.cross_track_rms_m < 0.03  # 17-44 cm without the guard
-    assert cross[after].max() < 0.45
+    # 1.5 / 3: 43.7 cm on main (s37), 46.5 with the braking reserve (the bad model's overspeed
+    # past 0.25 m/s under a saturated tilt trades path for braking until the rollback)
+    assert cross[after].max() < 0.50
 
 
 def test_without_the_guard_the_forced_adoption_flies_far_worse(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

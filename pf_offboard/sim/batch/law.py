@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from pf_offboard.control.law import BISECTION_STEPS, ControlLaw
+from pf_offboard.control.law import BISECTION_STEPS, BRAKING_RESERVE_MARGIN_M_S, BRAKING_RESERVE_SHARE, ControlLaw
 from pf_offboard.control.types import GRAVITY_M_S2, Gains, Limits
 from pf_offboard.sim.batch.geometry import hypot, power
 
@@ -378,6 +378,24 @@ class BatchLaw:
             byi = np.where(coast, lo * b_[1], b_[1])
             bzi = np.where(coast, lo * b_[2], b_[2])
             mui = np.where(coast, 0.0, lo)
+            e2, e2r = terms.eta2[idx], np.broadcast_to(eta2_ref, terms.eta2.shape)[idx]
+            over = np.abs(e2) - np.abs(e2r) - BRAKING_RESERVE_MARGIN_M_S  # the scalar law's gated braking reserve
+            share = BRAKING_RESERVE_SHARE * np.minimum(np.maximum(over, 0.0) / BRAKING_RESERVE_MARGIN_M_S, 1.0)
+            brake = ~coast & (u_eta[idx] * e2 < 0.0) & (share > 0.0)
+            if brake.any():
+                want = share[brake] * u_eta[idx][brake]
+                lo_b, hi_b = np.zeros(int(brake.sum())), mui[brake].copy()
+                tb = (t_[0][brake], t_[1][brake], t_[2][brake])
+                bb = (b_[0][brake], b_[1][brake], b_[2][brake])
+                nb = (n1[0][brake], n1[1][brake], n1[2][brake])
+                for _ in range(bisection_steps):
+                    mid = 0.5 * (lo_b + hi_b)
+                    lm, hm, em = ts.line_interval((bb[0] + mid * tb[0], bb[1] + mid * tb[1], bb[2] + mid * tb[2] + G), nb)
+                    bad = em | np.where(want < 0.0, lm > want, hm < want)
+                    hi_b = np.where(bad, mid, hi_b)
+                    lo_b = np.where(bad, lo_b, mid)
+                mui = mui.copy()
+                mui[brake] = lo_b
             bx, by, bz, mu = bx.copy(), by.copy(), bz.copy(), mu.copy()
             bx[idx], by[idx], bz[idx], mu[idx] = bxi, byi, bzi, mui
             f0 = (bxi + mui * t_[0], byi + mui * t_[1], bzi + mui * t_[2] + G)
