@@ -291,9 +291,7 @@ class _Compensator:
         if np.ndim(horizon) == 0 or bool(np.all(horizon == horizon[0])):  # one horizon: shared pieces
             h0 = float(horizon) if np.ndim(horizon) == 0 else float(horizon[0])
             t1_ = float(t1) if np.ndim(t1) == 0 else float(t1[0])
-            for h, u_sp in self._pieces(t0, t1_, h0):
-                if h > 0.0:
-                    self._piece(a_f, v, p, h, u_sp, None)
+            self._shared_pieces(a_f, v, p, [(h, u_sp) for h, u_sp in self._pieces(t0, t1_, h0) if h > 0.0])
             return
         # a horizon per flight (the identification moved some): the scalar's pieces per flight,
         # the setpoint history walked once with masks (same breakpoints, same order per flight)
@@ -318,6 +316,61 @@ class _Compensator:
                 break
         h = t1 - tau
         self._piece(a_f, v, p, h, tuple(cur), h > 0.0)  # type: ignore[arg-type]
+
+    def _shared_pieces(self, a_f: list[Arr], v: list[Arr], p: list[Arr], pieces: list[tuple[float, V | None]]) -> None:
+        """:meth:`_piece` for every flight, one ``h`` (> 0 s) per piece, the three axes stacked as
+        (3, N) arrays: per element the same operations in the same order (the lag's exponential by
+        ``math.exp`` on an axis with one lag, by NumPy on one with a lag per flight, as there)."""
+        if not pieces:
+            return
+        n = self.n
+
+        def stack(x: Any) -> Arr:
+            return np.array([np.broadcast_to(np.asarray(x[i], dtype=float), (n,)) for i in range(3)])
+
+        acc_f, vel, pos = stack(a_f), stack(v), stack(p)
+        gain, drag, dist = stack(self.gain), stack(self.drag), stack(self.disturbance)
+        lags = self.lag
+        scalar = all(np.ndim(lag) == 0 for lag in lags)
+        if scalar:
+            on_col = np.array([[float(lag) > 0.0] for lag in lags])
+            every = bool(on_col.all())
+        else:
+            lag_on = np.array([np.broadcast_to(np.asarray(lag) > 0.0, (n,)) for lag in lags])
+            lag_c = [np.where(np.asarray(lag) > 0.0, lag, 1.0) for lag in lags]
+        for h, u_sp in pieces:
+            u = gain * (stack(u_sp) if u_sp is not None else 0.0)
+            d = acc_f - u
+            if scalar:
+                alpha = [math.exp(-h / lag) if lag > 0.0 else 0.0 for lag in lags]
+                k1 = np.array([[lag / h] for lag in lags])
+                k2 = np.array([[1.0 - al] for al in alpha])
+                mean_a = u + d * k1 * k2
+                a_new = u + d * np.array([[al] for al in alpha])
+                if not every:
+                    hold = u + 0.0 * acc_f
+                    mean_a, a_new = np.where(on_col, mean_a, hold), np.where(on_col, a_new, hold)
+            else:
+                alpha_rows, k1_rows = [], []
+                for lag, lc in zip(lags, lag_c):
+                    if np.ndim(lag) == 0:
+                        alpha_rows.append(math.exp(-h / lag) if lag > 0.0 else 0.0)
+                        k1_rows.append(lag / h if lag > 0.0 else 0.0)
+                    else:
+                        al = np.exp(-h / lc)
+                        alpha_rows.append(al)
+                        k1_rows.append(lc / h)
+                alpha_a = np.array([np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in alpha_rows])
+                k1_a = np.array([np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in k1_rows])
+                hold = u + 0.0 * acc_f
+                mean_a = np.where(lag_on, u + d * k1_a * (1.0 - alpha_a), hold)
+                a_new = np.where(lag_on, u + d * alpha_a, hold)
+            acc = mean_a - drag * vel + dist
+            pos = pos + h * (vel + 0.5 * h * acc)
+            vel = vel + h * acc
+            acc_f = a_new
+        for i in range(3):
+            a_f[i], v[i], p[i] = acc_f[i], vel[i], pos[i]
 
     def _piece(self, a_f: list[Arr], v: list[Arr], p: list[Arr], h: Any, u_sp: V | None, rows: Any) -> None:
         """One zero-order-hold piece of ``_advance`` (``h`` > 0 s; ``rows``: the flights it applies

@@ -16,7 +16,7 @@ Jet = tuple[V, V, V]
 def interval(breaks: Arr, n: int, lam: Arr) -> NDArray[np.intp]:
     """:func:`pf_offboard.path.spline.interval` at many parameters."""
     i = np.searchsorted(breaks, lam, side="right") - 1
-    return np.clip(i, 0, n - 1)
+    return np.minimum(np.maximum(i, 0), n - 1)  # np.clip's, without its per-call dtype checks
 
 
 class BatchPath:
@@ -68,21 +68,16 @@ class BatchPath:
         i = interval(self._knots, self._nseg, lam)
         u = lam - self._centres[i]
         c = self._flat[i]  # (N, 3, 20)
-        out: list[list[Arr]] = []
-        for ax in range(3):
-            out.append(_horner4(c[:, ax, :].T, u))
-        x, y, z = out
-        return (x[0], y[0], z[0], x[1], y[1], z[1], x[2], y[2], z[2], x[3], y[3], z[3], x[4], y[4], z[4])
+        h = _horner4(c.T, u)  # the three axes at once: (3 axes, N) per order
+        return (h[0][0], h[0][1], h[0][2], h[1][0], h[1][1], h[1][2], h[2][0], h[2][1], h[2][2], h[3][0], h[3][1], h[3][2],
+                h[4][0], h[4][1], h[4][2])  # fmt: skip
 
     def eval2_floats(self, lam: Arr) -> tuple[Arr, ...]:
         """``QuinticSpline.eval2_floats`` (not wrapped): 9 arrays."""
         i = interval(self._knots, self._nseg, lam)
         u = lam - self._centres[i]
-        c = self._flat[i]
-        x = _horner2(c[:, 0, :].T, u)
-        y = _horner2(c[:, 1, :].T, u)
-        z = _horner2(c[:, 2, :].T, u)
-        return (x[0], y[0], z[0], x[1], y[1], z[1], x[2], y[2], z[2])
+        h = _horner2(self._flat[i].T, u)  # (3 axes, N) per order
+        return (h[0][0], h[0][1], h[0][2], h[1][0], h[1][1], h[1][2], h[2][0], h[2][1], h[2][2])
 
     def frame_jets(self, lam: Arr, s: tuple[Arr, ...]) -> tuple[Jet, Jet, Jet]:
         """``Path.frame_jets`` given ``s = eval_floats(lam)``."""
@@ -93,11 +88,8 @@ class BatchPath:
         lam = self.inrange(lam)
         i = interval(self._nodes, self._nint, lam)
         u = lam - self._nodes[i]
-        c = self._rflat[i]
-        hx = _horner2(c[:, 0, :].T, u)
-        hy = _horner2(c[:, 1, :].T, u)
-        hz = _horner2(c[:, 2, :].T, u)
-        ehat = ((hx[0], hy[0], hz[0]), (hx[1], hy[1], hz[1]), (hx[2], hy[2], hz[2]))
+        h = _horner2(self._rflat[i].T, u)  # (3 axes, N) per order
+        ehat = ((h[0][0], h[0][1], h[0][2]), (h[1][0], h[1][1], h[1][2]), (h[2][0], h[2][1], h[2][2]))
         e2 = unit_jet(*reject_jet(ehat, t))
         return t, e2, cross_jet(t, e2)
 
