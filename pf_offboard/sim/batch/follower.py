@@ -326,7 +326,10 @@ class _Compensator:
         n = self.n
 
         def stack(x: Any) -> Arr:
-            return np.array([np.broadcast_to(np.asarray(x[i], dtype=float), (n,)) for i in range(3)])
+            a, b, c = x
+            if type(a) is np.ndarray and type(b) is np.ndarray and type(c) is np.ndarray and a.shape == b.shape == c.shape == (n,):
+                return np.array((a, b, c), dtype=float)
+            return np.array([np.full(n, float(e)) if np.ndim(e) == 0 else e for e in (a, b, c)], dtype=float)
 
         acc_f, vel, pos = stack(a_f), stack(v), stack(p)
         gain, drag, dist = stack(self.gain), stack(self.drag), stack(self.disturbance)
@@ -336,7 +339,7 @@ class _Compensator:
             on_col = np.array([[float(lag) > 0.0] for lag in lags])
             every = bool(on_col.all())
         else:
-            lag_on = np.array([np.broadcast_to(np.asarray(lag) > 0.0, (n,)) for lag in lags])
+            lag_on = stack([np.asarray(lag) > 0.0 for lag in lags]) > 0.0
             lag_c = [np.where(np.asarray(lag) > 0.0, lag, 1.0) for lag in lags]
         for h, u_sp in pieces:
             u = gain * (stack(u_sp) if u_sp is not None else 0.0)
@@ -360,8 +363,7 @@ class _Compensator:
                         al = np.exp(-h / lc)
                         alpha_rows.append(al)
                         k1_rows.append(lc / h)
-                alpha_a = np.array([np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in alpha_rows])
-                k1_a = np.array([np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in k1_rows])
+                alpha_a, k1_a = stack(alpha_rows), stack(k1_rows)
                 hold = u + 0.0 * acc_f
                 mean_a = np.where(lag_on, u + d * k1_a * (1.0 - alpha_a), hold)
                 a_new = np.where(lag_on, u + d * alpha_a, hold)
