@@ -374,36 +374,24 @@ class _Compensator:
         for i in range(3):
             a_f[i], v[i], p[i] = acc_f[i], vel[i], pos[i]
 
-    def _piece(self, a_f: list[Arr], v: list[Arr], p: list[Arr], h: Any, u_sp: V | None, rows: Any) -> None:
-        """One zero-order-hold piece of ``_advance`` (``h`` > 0 s; ``rows``: the flights it applies
-        to, with ``h`` per flight; None: every flight, one ``h``)."""
-        if rows is not None:
-            if not rows.any():
-                return
-            h = np.where(rows, h, 1.0)
+    def _piece(self, a_f: list[Arr], v: list[Arr], p: list[Arr], h: Arr, u_sp: V | None, rows: Mask) -> None:
+        """One zero-order-hold piece of ``_advance`` for the flights ``rows`` (``h`` per flight, > 0 s
+        there); one ``h`` for every flight goes through :meth:`_shared_pieces`."""
+        if not rows.any():
+            return
+        h = np.where(rows, h, 1.0)
         for i in range(3):
             u = self.gain[i] * (u_sp[i] if u_sp is not None else 0.0)
             lag = self.lag[i]
-            if np.ndim(lag) == 0 and np.ndim(h) == 0:
-                if lag > 0.0:
-                    alpha = math.exp(-h / lag)
-                    mean_a = u + (a_f[i] - u) * (lag / h) * (1.0 - alpha)
-                    a_new = u + (a_f[i] - u) * alpha
-                else:
-                    mean_a = a_new = u + 0.0 * a_f[i]
-            else:
-                pos = np.asarray(lag) > 0.0
-                lag_ = np.where(pos, lag, 1.0)
-                alpha = np.exp(-h / lag_)
-                mean_a = np.where(pos, u + (a_f[i] - u) * (lag_ / h) * (1.0 - alpha), u + 0.0 * a_f[i])
-                a_new = np.where(pos, u + (a_f[i] - u) * alpha, u + 0.0 * a_f[i])
+            pos = np.asarray(lag) > 0.0
+            lag_ = np.where(pos, lag, 1.0)
+            alpha = np.exp(-h / lag_)
+            mean_a = np.where(pos, u + (a_f[i] - u) * (lag_ / h) * (1.0 - alpha), u + 0.0 * a_f[i])
+            a_new = np.where(pos, u + (a_f[i] - u) * alpha, u + 0.0 * a_f[i])
             acc = mean_a - self.drag[i] * v[i] + self.disturbance[i]
             p_new = p[i] + h * (v[i] + 0.5 * h * acc)
             v_new = v[i] + h * acc
-            if rows is None:
-                a_f[i], p[i], v[i] = a_new, p_new, v_new
-            else:
-                a_f[i], p[i], v[i] = np.where(rows, a_new, a_f[i]), np.where(rows, p_new, p[i]), np.where(rows, v_new, v[i])
+            a_f[i], p[i], v[i] = np.where(rows, a_new, a_f[i]), np.where(rows, p_new, p[i]), np.where(rows, v_new, v[i])
 
     def predict(self, time_s: float, position: V, velocity: V) -> tuple[V, V]:
         t_prev = self._t

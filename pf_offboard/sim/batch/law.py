@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from pf_offboard.control.feasible import ThrustSet
 from pf_offboard.control.law import BISECTION_STEPS, BRAKING_RESERVE_MARGIN_M_S, BRAKING_RESERVE_SHARE, ControlLaw
 from pf_offboard.control.types import GRAVITY_M_S2, Gains, Limits
 from pf_offboard.sim.batch.geometry import hypot, power
@@ -118,17 +119,6 @@ def inverse_columns(r1: V, r2: V, r3: V) -> tuple[tuple[V, V, V], Mask]:
 
 
 # ---------------------------------------------------------------------------------- thrust set
-def _roots(a: Arr, b: Arr, c: Arr, sq: Arr) -> tuple[Arr, Arr]:
-    """:func:`pf_offboard.control.feasible._roots`."""
-    q = np.where(b >= 0.0, -(b + sq), -(b - sq))
-    zero = q == 0.0
-    r1 = q / a
-    r2 = c / np.where(zero, 1.0, q)
-    lo = np.where(r1 <= r2, r1, r2)
-    hi = np.where(r1 <= r2, r2, r1)
-    return np.where(zero, 0.0, lo), np.where(zero, 0.0, hi)
-
-
 class BatchThrustSet:
     """:class:`pf_offboard.control.feasible.ThrustSet` on arrays."""
 
@@ -136,6 +126,7 @@ class BatchThrustSet:
         self.min_thrust_m_s2 = float(ts.min_thrust_m_s2)  # type: ignore[attr-defined]
         self.max_thrust_m_s2 = float(ts.max_thrust_m_s2)  # type: ignore[attr-defined]
         self.tan_tilt = float(ts.tan_tilt)  # type: ignore[attr-defined]
+        self._ts = ThrustSet(self.min_thrust_m_s2, self.max_thrust_m_s2, self.tan_tilt)
 
     def active(self, f: V, rel: float = 1e-6) -> tuple[Mask, Mask]:
         fx, fy, fz = f
@@ -145,55 +136,9 @@ class BatchThrustSet:
         return tilt, thrust
 
     def line_interval(self, f0: V, m: V) -> tuple[Arr, Arr, Mask]:
-        """``(lo, hi, empty)``: the scalar's None is ``empty``."""
-        n = f0[0].shape
-        lo = np.full(n, -_INF)
-        hi = np.full(n, _INF)
-        mz = m[2]
-        gap = self.min_thrust_m_s2 - f0[2]
-        safe = np.where(mz == 0.0, 1.0, mz)
-        lo = np.where(mz > 0.0, gap / safe, lo)
-        hi = np.where(mz < 0.0, gap / safe, hi)
-        empty = (mz == 0.0) & (gap > 0.0)
-        # |f0 + s m|^2 <= T_max^2
-        a = m[0] * m[0] + m[1] * m[1] + mz * mz
-        b = f0[0] * m[0] + f0[1] * m[1] + f0[2] * mz
-        c = f0[0] * f0[0] + f0[1] * f0[1] + f0[2] * f0[2] - self.max_thrust_m_s2 * self.max_thrust_m_s2
-        flat = a <= 0.0
-        empty |= flat & (c > 0.0)
-        disc = b * b - a * c
-        empty |= ~flat & (disc < 0.0)
-        use = ~flat & (disc >= 0.0)
-        r1, r2 = _roots(np.where(use, a, 1.0), b, c, np.sqrt(np.where(use, disc, 0.0)))
-        lo = np.where(use, np.maximum(lo, r1), lo)
-        hi = np.where(use, np.minimum(hi, r2), hi)
-        # the tilt cone
-        t2 = self.tan_tilt * self.tan_tilt
-        a = t2 * mz * mz - (m[0] * m[0] + m[1] * m[1])
-        b = t2 * f0[2] * mz - (f0[0] * m[0] + f0[1] * m[1])
-        c = t2 * f0[2] * f0[2] - (f0[0] * f0[0] + f0[1] * f0[1])
-        scale = np.maximum(np.maximum(np.abs(a), np.abs(b)), np.maximum(np.abs(c), 1e-300))
-        lin = np.abs(a) <= 1e-14 * scale
-        bsafe = np.where(b == 0.0, 1.0, b)
-        root = -c / (2.0 * bsafe)
-        lo = np.where(lin & (b > 0.0), np.maximum(lo, root), lo)
-        hi = np.where(lin & (b < 0.0), np.minimum(hi, root), hi)
-        empty |= lin & (b == 0.0) & (c < 0.0)
-        disc = b * b - a * c
-        quad = ~lin
-        cross = quad & (a < 0.0)
-        empty |= cross & (disc < 0.0)
-        inside = quad & (a > 0.0) & (disc > 0.0)
-        use = (cross & (disc >= 0.0)) | inside
-        r1, r2 = _roots(np.where(use, a, 1.0), b, c, np.sqrt(np.where(use, disc, 0.0)))
-        c_use = cross & (disc >= 0.0)
-        lo = np.where(c_use, np.maximum(lo, r1), lo)
-        hi = np.where(c_use, np.minimum(hi, r2), hi)
-        up = mz > 0.0
-        lo = np.where(inside & up, np.maximum(lo, r2), lo)
-        hi = np.where(inside & ~up, np.minimum(hi, r1), hi)
-        empty |= lo > hi
-        return lo, hi, empty
+        """``(lo, hi, empty)``: the scalar's None is ``empty`` (:meth:`ThrustSet.line_intervals`,
+        the scalar's operations elementwise)."""
+        return self._ts.line_intervals(f0, m)
 
     def clip(self, f: V) -> V:
         fx, fy, fz = f
