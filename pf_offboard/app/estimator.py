@@ -504,7 +504,8 @@ class Estimator:
 
 
 def _norm3(v: NDArray[np.float64]) -> float:
-    """Euclidean length of a 3-vector on plain floats (np.linalg.norm costs ~3 us per call here)."""
+    """Euclidean length of a 3-vector on plain floats (the gates run on every sample; np.linalg.norm
+    costs ~3 us per call)."""
     x, y, z = v.tolist()
     return math.sqrt(x * x + y * y + z * z)
 
@@ -515,20 +516,13 @@ def _consistent(
     """Could a vehicle at p0 with velocity v0 (trusted) at t0 be at p1 with velocity v1 at t1?
     (generous bounds: speed, acceleration; the distance from the *trusted* speed only)"""
     dt = max(t1_s - t0_s, 0.0)
-    # plain floats: this gate runs on every position sample (np.linalg.norm on 3-vectors dominated it)
-    v1x, v1y, v1z = v1_ned.tolist()
-    v0x, v0y, v0z = v0_ned.tolist()
-    speed0 = math.sqrt(v0x * v0x + v0y * v0y + v0z * v0z)
-    if math.sqrt(v1x * v1x + v1y * v1y + v1z * v1z) > MAX_SPEED_M_S or speed0 > MAX_SPEED_M_S:
+    speed0 = _norm3(v0_ned)
+    if _norm3(v1_ned) > MAX_SPEED_M_S or speed0 > MAX_SPEED_M_S:
         return False
-    dx, dy, dz = v1x - v0x, v1y - v0y, v1z - v0z
-    if math.sqrt(dx * dx + dy * dy + dz * dz) > VELOCITY_MARGIN_M_S + MAX_ACCEL_M_S2 * dt:
+    if _norm3(v1_ned - v0_ned) > VELOCITY_MARGIN_M_S + MAX_ACCEL_M_S2 * dt:
         return False
     allowed = JUMP_MARGIN_M + (speed0 + JUMP_SPEED_SLACK_M_S) * dt
-    p1x, p1y, p1z = p1_ned.tolist()
-    p0x, p0y, p0z = p0_ned.tolist()
-    dx, dy, dz = p1x - p0x, p1y - p0y, p1z - p0z
-    return math.sqrt(dx * dx + dy * dy + dz * dz) <= allowed
+    return _norm3(p1_ned - p0_ned) <= allowed
 
 
 def _unexplained_step(
