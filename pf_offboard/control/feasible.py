@@ -32,6 +32,12 @@ class ThrustSet(NamedTuple):
             and math.hypot(fx, fy) <= self.tan_tilt * fz + tol
         )
 
+    def contains_each(self, fx: Arr, fy: Arr, fz: Arr, tol: float = 1e-9) -> NDArray[np.bool_]:
+        """:meth:`contains` for many vectors (component arrays), with ``math.hypot`` as there: the
+        same verdicts."""
+        h = np.fromiter(map(math.hypot, fx.tolist(), fy.tolist()), float, len(fx))
+        return (fz >= self.min_thrust_m_s2 - tol) & (fx * fx + fy * fy + fz * fz <= (self.max_thrust_m_s2 + tol) ** 2) & (h <= self.tan_tilt * fz + tol)
+
     def active(self, f: Vec, rel: float = 1e-6) -> tuple[bool, bool]:
         """(tilt, thrust): is f on the tilt cone / on a thrust bound (within ``rel``)."""
         fx, fy, fz = f

@@ -53,6 +53,7 @@ GRID_STEP_M = 0.02  # arclength grid of the precomputation (finer on short paths
 MIN_GRID_POINTS = 200
 MAX_GRID_POINTS = 20000
 _FEASIBLE_TOL = 1e-9
+_WITHIN_TOL = 1e-6  # a smoothed profile's acceleration counts as feasible this far outside its interval
 JERK_FLOOR_SPEED_M_S = 0.25  # speed used in the jerk bound below it (m/s): see _jerk_smooth
 # The vehicle's inner loop (its identified lag + delay, s) scales the share of the limits the
 # reference may use: accel_share * RESPONSE_REFERENCE_S / (RESPONSE_REFERENCE_S + lag + delay), so
@@ -280,26 +281,20 @@ class _Feasible:
         out[idx] = lo
         return out
 
-    def _contains(self, fx: NDArray[np.float64], fy: NDArray[np.float64], fz: NDArray[np.float64]) -> NDArray[np.bool_]:
-        """:meth:`ThrustSet.contains` (tol 0) elementwise (math.hypot, as the scalar)."""
-        ts = self.set
-        h = np.fromiter(map(math.hypot, fx.tolist(), fy.tolist()), float, len(fx))
-        return (fz >= ts.min_thrust_m_s2 - 0.0) & (fx * fx + fy * fy + fz * fz <= (ts.max_thrust_m_s2 + 0.0) ** 2) & (h <= ts.tan_tilt * fz + 0.0)
-
     def uses(self, b: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]:
         """:meth:`use` at every grid point (the same bisection, all points at once)."""
         ax, ay, az = self._kx * b + self._tx * a, self._ky * b + self._ty * a, self._kz * b + self._tz * a
         n = len(b)
         lo, hi = np.zeros(n), np.ones(n)
         with np.errstate(all="ignore"):
-            grow = ~self._contains(ax / hi, ay / hi, G + az / hi) & (hi < 64.0)
+            grow = ~self.set.contains_each(ax / hi, ay / hi, G + az / hi, 0.0) & (hi < 64.0)
             while grow.any():
                 lo = np.where(grow, hi, lo)
                 hi = np.where(grow, 2.0 * hi, hi)
-                grow &= ~self._contains(ax / hi, ay / hi, G + az / hi) & (hi < 64.0)
+                grow &= ~self.set.contains_each(ax / hi, ay / hi, G + az / hi, 0.0) & (hi < 64.0)
             for _ in range(40):
                 mid = 0.5 * (lo + hi)
-                inside = (mid > 0.0) & self._contains(ax / mid, ay / mid, G + az / mid)
+                inside = (mid > 0.0) & self.set.contains_each(ax / mid, ay / mid, G + az / mid, 0.0)
                 hi = np.where(inside, mid, hi)
                 lo = np.where(inside, lo, mid)
         return np.where((b == 0.0) & (a == 0.0), 0.0, hi)
@@ -569,7 +564,7 @@ class SpeedProfile:
             b = smooth
             a = (np.roll(b, -1) - b) / (2.0 * ds)
             lo, hi, ok = feas.intervals(b)
-            tol = 1e-6  # _within's
+            tol = _WITHIN_TOL
             inside = ok & (lo - tol <= a) & (a <= hi + tol)  # point i, interval i
             after = np.roll(ok, -1) & (np.roll(lo, -1) - tol <= a) & (a <= np.roll(hi, -1) + tol)  # point i + 1
             good = inside & after
@@ -621,10 +616,6 @@ class SpeedProfile:
     def speed_m_s(self, eta1: float) -> float:
         """|eta2_ref| at eta1 (m/s)."""
         return abs(self.evaluate(eta1)[0])
-
-
-def _within(iv: tuple[float, float] | None, a: float, tol: float = 1e-6) -> bool:
-    return iv is not None and iv[0] - tol <= a <= iv[1] + tol
 
 
 def point_mass_lap_time(path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float = 1.0, response_s: float = 0.0,
