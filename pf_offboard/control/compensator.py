@@ -59,7 +59,7 @@ MAX_GAP_S = 0.25
 OFFSET_INTEGRAL_BAND_M = 0.2
 # How fast the identified lag and dead time may move the model (s per s of flight).
 ADAPT_SLEW = 0.1
-ADAPT_DRAG_SLEW = 0.5  # 1/s per s
+ADAPT_DRAG_SLEW = 1.0  # 1/s per s
 # After a bank candidate's adoption the compensator follows its live drag estimate through a
 # low-pass of DRAG_FOLLOW_S (starting from the adopted value). That drag is a gradient estimate
 # whose bandwidth grows with the speed squared (DRAG_RATE |v|^2: ~23 1/s at 2.4 m/s): followed
@@ -457,6 +457,7 @@ class InnerLoopCompensator:
         model to the compensator's parameters (mirrored by
         ``pf_offboard.sim.batch.follower._Compensator._move_to_target``)."""
         gain_step, drag_step = ADAPT_GAIN_SLEW * dt, ADAPT_DRAG_SLEW * dt
+        drag_before = self.drag
         if gain is not None:
             cur = self.gain[0]
             new_gain = cur + max(-gain_step, min(gain_step, gain - cur))
@@ -477,8 +478,19 @@ class InnerLoopCompensator:
             cur, drag_step = self.drag[0], ADAPT_DRAG_SLEW * dt
             new_drag = cur + max(-drag_step, min(drag_step, drag - cur))
             self.drag = (new_drag, new_drag, self.drag[2])
+        self._hand_over_drag(drag_before)
         self.delay_s = self.delay_z_s = self.horizon_s = new_delay
         self.hold_s = (0.0, 0.0, 0.0)
+
+    def _hand_over_drag(self, drag_before: Vec) -> None:
+        """The observer hands over what the model's drag now explains: d̂ += Δdrag ⊙ v̂, so the
+        modelled acceleration (``gain·a − drag·v + d̂``) does not jump as the drag slews in. Without
+        it d̂ trails the new drag by ~1/observer_rad_s and, at 2-3 m/s, the model's acceleration runs
+        0.3-0.5 m/s² off for that long (docs/design-decisions.md, "The joint adoption's drag")."""
+        c, v, d, dmax = self.drag, self._v_hat, self.disturbance, self.max_disturbance_m_s2
+        if c == drag_before:
+            return
+        self.disturbance = tuple(min(dmax, max(-dmax, d[i] + (c[i] - drag_before[i]) * v[i])) for i in range(3))  # type: ignore[assignment]
 
     def _extrapolate(self, time_s: float, position: Vec, velocity: Vec) -> tuple[Vec, Vec]:
         """Integrate the model from the measurement over the setpoints already sent (Smith) to

@@ -9,6 +9,7 @@ tests/sim/test_realistic_flight.py.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
 
@@ -99,6 +100,29 @@ def test_observer_is_bounded_and_resets() -> None:
     assert comp.disturbance[2] == pytest.approx(-2.0)  # anti-windup bound
     comp.reset()
     assert comp.disturbance == (0.0, 0.0, 0.0) and comp.integral_offsets() == (0.0, 0.0, 0.0)
+
+
+def test_an_adopted_drag_is_handed_over_by_the_observer_without_a_jump() -> None:
+    """As an adoption slews the model's drag in, d̂ gives up what the drag now explains
+    (d̂ += Δdrag ⊙ v̂): the modelled acceleration (−drag·v̂ + d̂) is the same before and after each
+    slew step, and at the end d̂ holds only what the drag does not explain (here nothing)."""
+    plant = ModelPlant(MODEL, (0, 0, 0), (2.0, -1.0, 0.5))
+    comp = InnerLoopCompensator(dataclasses.replace(MODEL, drag_xy_1_s=0.0, drag_z_1_s=0.0), observer_rad_s=4.0)
+    a_sp = np.array([1.2, -0.6, 0.2]) / np.array([MODEL.accel_gain_xy, MODEL.accel_gain_xy, MODEL.accel_gain_z])
+    jumps = []
+    while plant.t < 9.0:
+        comp.predict(plant.t, tuple(plant.p), tuple(plant.v))
+        if plant.t > 4.0:  # the observer has absorbed the drag: d̂ = -0.6 v (x, y), -0.4 v (z)
+            before = [-c * v + d for c, v, d in zip(comp.drag, comp._v_hat, comp.disturbance)]
+            comp._move_to_target(DT_CTRL_S, (MODEL.accel_lag_xy_s, MODEL.accel_delay_s), MODEL.drag_xy_1_s,
+                                 MODEL.accel_gain_xy, (MODEL.accel_gain_z, MODEL.drag_z_1_s))
+            after = [-c * v + d for c, v, d in zip(comp.drag, comp._v_hat, comp.disturbance)]
+            jumps.append(max(abs(a - b) for a, b in zip(after, before)))
+        comp.record(plant.t, tuple(a_sp))
+        plant.step(a_sp)
+    assert comp.drag == pytest.approx((0.6, 0.6, 0.4))
+    assert max(jumps) < 1e-12
+    assert np.allclose(comp.disturbance, 0.0, atol=0.02), comp.disturbance
 
 
 def test_predictor_is_exact_for_its_model() -> None:

@@ -525,6 +525,7 @@ class _Compensator:
         """``InnerLoopCompensator._move_to_target`` for the flights ``rows`` (drag, gain, vertical
         NaN: none)."""
         gain_step, drag_step = ADAPT_GAIN_SLEW * dt, ADAPT_DRAG_SLEW * dt
+        drag_before = self.drag
         has_gain = rows & ~np.isnan(gain)
         cur_gain = self.gain[0]
         new_gain = np.where(has_gain, cur_gain + np.maximum(-gain_step, np.minimum(gain_step, gain - cur_gain)), cur_gain)
@@ -547,6 +548,9 @@ class _Compensator:
         cur, drag_step = self.drag[0], ADAPT_DRAG_SLEW * dt
         new_drag = np.where(has, cur + np.maximum(-drag_step, np.minimum(drag_step, drag - cur)), cur)
         self.drag = (new_drag, new_drag, self.drag[2])
+        # InnerLoopCompensator._hand_over_drag (where the drag did not move: + 0, the same d̂)
+        c, v, d, dmax = self.drag, self._v_hat, self.disturbance, self.max_disturbance_m_s2
+        self.disturbance = tuple(np.minimum(dmax, np.maximum(-dmax, d[i] + (c[i] - drag_before[i]) * v[i])) for i in range(3))  # type: ignore[assignment]
         self.horizon_s = np.where(rows, new_delay, cur_delay)  # delay_s = delay_z_s = horizon_s, no hold (equal already)
 
     def identified(self) -> dict[str, Arr] | None:
