@@ -2,9 +2,11 @@
 
 The table sits between two marker comments in README.md; this script rewrites what is between
 them. ``--check`` writes nothing and exits 1 when the README's block differs (tests/test_readme.py
-runs the same comparison).
+runs the same comparison). ``--from-campaign DIR`` first rewrites the data's measured rows from a
+campaign of ``scripts/real_sitl_campaign.py`` (every path and output at 1.5 m/s and with the profile
+to 3 m/s; ranges over the paths and repeats), keeping its conditions, notes and refused rows.
 
-    python scripts/gen_readme_table.py [--check]
+    python scripts/gen_readme_table.py [--check] [--from-campaign DIR]
 """
 
 from __future__ import annotations
@@ -45,6 +47,45 @@ def render(data: dict) -> str:
     return "\n".join(out)
 
 
+AUTOPILOTS = {"px4": "PX4 SIH", "arducopter": "ArduCopter"}
+OUTPUTS = ("acceleration", "attitude", "rates")
+
+
+def _span(values: list[float], k: float = 100.0) -> list[float]:
+    return [round(min(values) * k, 1), round(max(values) * k, 1)]
+
+
+def campaign_rows(directory: Path) -> list[dict]:
+    """The measured rows from a campaign's ``*/result.json`` (from activation + 8 s, completed
+    flights): per autopilot and output at the config's speed, then per autopilot with the profile
+    (all its outputs in one row, the mean speeds in its label)."""
+    flights: dict[tuple[str, str, float], list[dict]] = {}
+    for res_file in sorted(directory.glob("*/result.json")):
+        res = json.loads(res_file.read_text(encoding="utf-8"))
+        spec, settled = res["spec"], ((res.get("tracking") or {}).get("settled") or {})
+        if spec.get("throw") or spec.get("fast_start") or res.get("exit_code") != 0 or "cross_track_rms_m" not in settled:
+            continue
+        flights.setdefault((spec["autopilot"], spec["output"], spec.get("max_speed_m_s") or 0.0), []).append(settled)
+    rows = []
+    for ap in ("arducopter", "px4"):
+        for out in OUTPUTS:
+            ws = flights.get((ap, out, 0.0))
+            if ws:
+                rows.append({"autopilot": AUTOPILOTS[ap], "output": out, "config": "default", "laps": 3, "flights": str(len(ws)),
+                             "cross_track_rms_cm": _span([w["cross_track_rms_m"] for w in ws]),
+                             "speed_error_rms_cm_s": _span([w["speed_error_rms_m_s"] for w in ws])})  # fmt: skip
+        fast = [(out, w) for (a, out, v), ws in sorted(flights.items()) if a == ap and v > 0.0 for w in ws]
+        if fast:
+            v = sorted({(a, sp) for (a, _, sp) in flights if a == ap and sp > 0.0})[0][1]
+            outs = [o for o in OUTPUTS if any(o == x for x, _ in fast)]
+            mean = _span([w["speed_mean_m_s"] for _, w in fast], 1.0)
+            rows.append({"autopilot": f"{AUTOPILOTS[ap]}, profile to {v:g} m/s ({mean[0]:.1f}–{mean[1]:.1f} m/s mean)",
+                         "output": " / ".join(outs) if len(outs) < 3 else "all three", "config": "default", "laps": 3,
+                         "flights": str(len(fast)), "cross_track_rms_cm": _span([w["cross_track_rms_m"] for _, w in fast]),
+                         "speed_error_rms_cm_s": _span([w["speed_error_rms_m_s"] for _, w in fast])})  # fmt: skip
+    return rows
+
+
 def block(text: str) -> str:
     """The README's current block between the markers."""
     if BEGIN not in text or END not in text:
@@ -55,7 +96,15 @@ def block(text: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="exit 1 if README.md's table is not what the data gives")
+    ap.add_argument("--from-campaign", type=Path, metavar="DIR", help="rewrite the data's measured rows from this campaign first")
     args = ap.parse_args(argv)
+    if args.from_campaign:
+        data = json.loads(DATA.read_text(encoding="utf-8"))
+        rows = campaign_rows(args.from_campaign)
+        if not rows:
+            raise SystemExit(f"{args.from_campaign}: no completed flights")
+        data["rows"] = rows + [r for r in data["rows"] if "refused" in r]
+        DATA.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
     text = README.read_text(encoding="utf-8")
     want = render(json.loads(DATA.read_text(encoding="utf-8")))
     if block(text) == want:

@@ -38,6 +38,39 @@ def test_readme_real_autopilot_table_is_generated_from_its_data():
     assert gen.main(["--check"]) == 0
 
 
+def test_readme_rows_come_from_a_campaigns_results(tmp_path):
+    """``--from-campaign``: one row per autopilot and output at the config's speed, one per
+    autopilot with the profile (mean speeds in its label); failed flights and starts left out."""
+    import importlib.util
+    import json
+
+    spec = importlib.util.spec_from_file_location("gen_readme_table", ROOT / "scripts" / "gen_readme_table.py")
+    gen = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(gen)
+
+    def flight(name, autopilot, output, vmax, rms, speed_err, mean, exit_code=0, **extra):
+        d = tmp_path / name
+        d.mkdir()
+        settled = {"cross_track_rms_m": rms, "speed_error_rms_m_s": speed_err, "speed_mean_m_s": mean}
+        spec = {"autopilot": autopilot, "output": output, "max_speed_m_s": vmax, **extra}
+        (d / "result.json").write_text(json.dumps({"spec": spec, "exit_code": exit_code, "tracking": {"settled": settled}}))
+
+    flight("a", "px4", "attitude", None, 0.031, 0.07, 1.5)
+    flight("b", "px4", "attitude", None, 0.045, 0.09, 1.49)
+    flight("c", "px4", "rates", None, 0.5, 0.9, 1.2, exit_code=5)  # did not complete
+    flight("d", "px4", "rates", 3.0, 0.062, 0.15, 2.27)
+    flight("e", "px4", "acceleration", 3.0, 0.05, 0.12, 2.81)
+    flight("f", "arducopter", "rates", None, 0.01, 0.02, 1.5, throw=[1, 2])  # a start, not a row
+    rows = gen.campaign_rows(tmp_path)
+    assert rows == [
+        {"autopilot": "PX4 SIH", "output": "attitude", "config": "default", "laps": 3, "flights": "2",
+         "cross_track_rms_cm": [3.1, 4.5], "speed_error_rms_cm_s": [7.0, 9.0]},
+        {"autopilot": "PX4 SIH, profile to 3 m/s (2.3–2.8 m/s mean)", "output": "acceleration / rates", "config": "default",
+         "laps": 3, "flights": "2", "cross_track_rms_cm": [5.0, 6.2], "speed_error_rms_cm_s": [12.0, 15.0]},
+    ]
+
+
 def test_readme_is_short():
     assert len((ROOT / "README.md").read_bytes()) <= 10 * 1024
 
