@@ -119,3 +119,12 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         cost[unit_of[item.nodeid]] = cost.get(unit_of[item.nodeid], 0.0) + expected.get(item.nodeid, 0.0)
     items.sort(key=lambda item: -cost[unit_of[item.nodeid]])  # stable: equal units keep their order
+    # xdist (3.8) marks a grouped test for loadgroup by appending "@group" to its node id, written
+    # to `item._nodeid`; pytest 9 keeps the id in `item._id`, so that changed nothing and no test was
+    # grouped (a module fixture built on both workers, the fixed-port tests side by side). Write
+    # the same suffix where pytest reads the id; with an older pytest (it has `_nodeid`) xdist does.
+    if getattr(config.option, "loadgroup", False):
+        for item in items:
+            unit = unit_of[item.nodeid]
+            if unit.startswith("@") and not hasattr(item, "_nodeid") and hasattr(item, "_id"):
+                item._id = type(item._id).parse(item.nodeid + unit)

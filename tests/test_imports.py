@@ -123,15 +123,19 @@ def test_the_checker_finds_a_circle() -> None:
 
 
 
+@pytest.fixture(scope="module")
+def graph() -> dict[str, set[str]]:
+    """The import graph of the sources, parsed once for the tests below (they only read it)."""
+    return _graph()
+
+
 @pytest.mark.parametrize("package", ["pf_offboard", "sitl_mock"])
-def test_no_import_circles(package: str) -> None:
-    graph = _graph()
+def test_no_import_circles(graph: dict[str, set[str]], package: str) -> None:
     cycles = [c for c in _cycles(graph) if c[0].split(".")[0] == package]
     assert not cycles, "import circles: " + "; ".join(" <-> ".join(c) for c in cycles)
 
 
-def test_the_core_imports_neither_the_yaml_layer_nor_the_app() -> None:
-    graph = _graph()
+def test_the_core_imports_neither_the_yaml_layer_nor_the_app(graph: dict[str, set[str]]) -> None:
     bad = {
         (name, target)
         for name, targets in graph.items()

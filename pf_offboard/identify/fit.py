@@ -287,10 +287,11 @@ def input_samples(seg: Segment, axes: tuple[int, ...], lag_s: float, delay_s: fl
     return y
 
 
-def input_increments(seg: Segment, axes: tuple[int, ...], lag_s: float, delay_s: float) -> NDArray[np.float64]:
-    """∫ u over each grid interval [t_k, t_k+1) (m/s): exact for the lag of the held input; the
-    measured tilt's cosine, which changes slowly, at the interval's mean of its end values."""
-    inc = lag_increments(_model_input(seg, axes, delay_s), seg.dt_s, lag_s)
+def _increments(seg: Segment, axes: tuple[int, ...], delayed_input: NDArray[np.float64], lag_s: float) -> NDArray[np.float64]:
+    """∫ u over each grid interval [t_k, t_k+1) (m/s) from the delayed model input
+    (:func:`_model_input`): exact for the lag of the held input; the measured tilt's cosine, which
+    changes slowly, at the interval's mean of its end values."""
+    inc = lag_increments(delayed_input, seg.dt_s, lag_s)
     if _along_measured_tilt(seg, axes):
         up = seg.thrust_axis_up
         assert up is not None
@@ -299,10 +300,16 @@ def input_increments(seg: Segment, axes: tuple[int, ...], lag_s: float, delay_s:
     return inc
 
 
-def _input_integrals(gd: _GroupData, lag_s: float, delay_s: float) -> NDArray[np.float64]:
+def _model_inputs(gd: _GroupData, delay_s: float) -> list[NDArray[np.float64]]:
+    """Each segment's delayed model input: computed once per dead time, shared by every lag."""
+    return [_model_input(seg, gd.axes, delay_s) for seg in gd.segments]
+
+
+def _input_integrals(gd: _GroupData, lag_s: float, inputs: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """∫ u over each window; ``inputs``: :func:`_model_inputs` at the dead time."""
     out = []
-    for seg, win in zip(gd.segments, gd.windows):
-        inc = input_increments(seg, gd.axes, lag_s, delay_s)
+    for seg, win, u in zip(gd.segments, gd.windows, inputs):
+        inc = _increments(seg, gd.axes, u, lag_s)
         cu = np.zeros_like(inc)
         cu[1:] = np.cumsum(inc[:-1], axis=0)
         for j in range(len(gd.axes)):
@@ -317,8 +324,8 @@ def _design(gd: _GroupData, iu: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.column_stack(cols)
 
 
-def _solve(gd: _GroupData, lag_s: float, delay_s: float) -> tuple[NDArray[np.float64], float]:
-    a = _design(gd, _input_integrals(gd, lag_s, delay_s))
+def _solve(gd: _GroupData, lag_s: float, inputs: Sequence[NDArray[np.float64]]) -> tuple[NDArray[np.float64], float]:
+    a = _design(gd, _input_integrals(gd, lag_s, inputs))
     theta, *_ = np.linalg.lstsq(a, gd.dv, rcond=None)
     r = gd.dv - a @ theta
     return theta, float(r @ r)
@@ -329,7 +336,8 @@ def _grid(lo: float, hi: float, step: float) -> NDArray[np.float64]:
 
 
 def _best_lag(gd: _GroupData, delay_s: float, lags: NDArray[np.float64]) -> tuple[float, float]:
-    costs = [_solve(gd, float(lag), delay_s)[1] for lag in lags]
+    inputs = _model_inputs(gd, delay_s)
+    costs = [_solve(gd, float(lag), inputs)[1] for lag in lags]
     k = int(np.argmin(costs))
     return float(lags[k]), float(costs[k])
 
@@ -383,13 +391,13 @@ def _quality_r2(gd: _GroupData, lag_s: float, delay_s: float, theta: NDArray[np.
     q = _group_data(gd.segments, gd.axes, QUALITY_WINDOW_S)
     if len(q.dv) < 2:
         return math.nan
-    r = q.dv - _design(q, _input_integrals(q, lag_s, delay_s)) @ theta
+    r = q.dv - _design(q, _input_integrals(q, lag_s, _model_inputs(q, delay_s))) @ theta
     sst = float(np.sum((q.dv - q.dv.mean()) ** 2))
     return 1.0 - float(r @ r) / sst if sst > 0 else math.nan
 
 
 def _fit_group(name: str, gd: _GroupData, lag_s: float, delay_s: float) -> AxisFit:
-    theta, _ = _solve(gd, lag_s, delay_s)
+    theta, _ = _solve(gd, lag_s, _model_inputs(gd, delay_s))
     gain, drag, bias = float(theta[0]), float(theta[1]), np.asarray(theta[2:])
     nrmse = _simulate_nrmse(gd, lag_s, delay_s, gain, drag, bias)
     a = np.concatenate([s.accel_sp_enu_m_s2[:, gd.axes] for s in gd.segments])
@@ -411,11 +419,12 @@ def fit_rate_loop(segments: Sequence[Segment]) -> RateFit | None:
     best = (math.inf, 0.0, 0.0)
     sst = sum(float(np.sum((s.rates_frd_rad_s[:, :2] - s.rates_frd_rad_s[:, :2].mean(axis=0)) ** 2)) for s in segs)  # type: ignore[index]
     for d in _grid(0.0, 0.1, 0.005):
+        shifted = [delayed(s.rates_sp_frd_rad_s[:, :2], s.dt_s, float(d)) for s in segs]  # type: ignore[index]  # once per dead time
         for lag in _grid(0.0, 0.4, 0.005):
             sse = 0.0
-            for s in segs:
+            for s, sp in zip(segs, shifted):
                 burn = int(round(BURN_IN_S / s.dt_s))
-                y = lagged(delayed(s.rates_sp_frd_rad_s[:, :2], s.dt_s, float(d)), s.dt_s, float(lag))  # type: ignore[index]
+                y = lagged(sp, s.dt_s, float(lag))
                 r = (y - s.rates_frd_rad_s[:, :2])[burn:]  # type: ignore[index]
                 sse += float(np.sum(r * r))
             if sse < best[0]:

@@ -24,7 +24,7 @@ from pf_offboard.app.pipeline import Pipeline
 from pf_offboard.app.profiles import PX4
 from pf_offboard.logs.tlog import read_tlog
 
-from .flights import fly_args, write_config
+from .flights import RATE_HZ, fly_args, write_config
 from .helpers import attitude_quaternion, local_position, quat_about
 
 
@@ -126,7 +126,10 @@ def test_heartbeat_interval_refusal_is_one_note_line(tmp_path) -> None:
     """PX4 refuses SET_MESSAGE_INTERVAL for HEARTBEAT (COMMAND_ACK FAILED): one note line, even
     with --quiet, not an error; the flight goes on."""
     cfg = MockConfig(vehicle="fast", profile="px4", spawn=SpawnSpec.parse("hover:-3,0,-2"), udp_local_port=0, udp_remote=None,
-                     lockstep=True, lockstep_dt_s=0.004)  # fmt: skip
+                     lockstep=True, lockstep_dt_s=1.0 / RATE_HZ)  # fmt: skip
+    # one lockstep step per setpoint period, as in the other lockstep flights: at 4 ms a step most
+    # setpoints brought no fresh state (streamed at 100 Hz), so the flight advanced on the app's
+    # 10 Hz keep-alive (~19 s of wall time for this 1 s flight)
     config = write_config(tmp_path)
     status = io.StringIO()
     with run_in_thread(cfg) as mock:

@@ -12,6 +12,7 @@ that may run at ``clock_rate`` times the boot clock (a lockstep SITL is not real
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -76,7 +77,8 @@ def write_tlog(
     step = np.zeros(3)
     next_change = np.zeros(3)
     delay_steps = int(round(truth.delay_s * 1000))
-    history = [np.zeros(3)] * (delay_steps + 1)  # 1 kHz setpoint history for the delay
+    history = deque([np.zeros(3)] * (delay_steps + 1), maxlen=delay_steps + 2)  # 1 kHz setpoint history for the delay
+    alpha = np.where(lag > 0, 1.0 - np.exp(-1e-3 / np.maximum(lag, 1e-9)), 1.0)  # the lag's per-millisecond factor
     path.parent.mkdir(parents=True, exist_ok=True)
     with TlogWriter.open(path) as log:
         def send(mav, msg, t_boot: float) -> None:
@@ -109,8 +111,6 @@ def write_tlog(
             for _ in range(int(round(dt * 1000))):
                 history.append(asked.copy())
                 delayed = history[-1 - delay_steps]
-                history = history[-(delay_steps + 2):]
-                alpha = np.where(lag > 0, 1.0 - np.exp(-1e-3 / np.maximum(lag, 1e-9)), 1.0)
                 u = u + alpha * (delayed - u)
                 response = u.copy()
                 if tilt_coupled:

@@ -15,6 +15,7 @@ Measured (seed 0): compensated 2.0 cm cross-track RMS, mean speed error +0.1 cm/
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -49,15 +50,29 @@ def _flown(tmp: Path, compensated: bool, output_mode: str = "attitude") -> tuple
     return errors(late_records(res.records))
 
 
-def _fly(tmp: Path, compensated: bool) -> tuple[float, float]:
-    ct, err = _flown(tmp, compensated)
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
+    """``_flown`` once per (compensated, output mode) in this module: the compensated attitude
+    flight is both tests' (seeded, deterministic)."""
+    done: dict[tuple[bool, str], tuple[np.ndarray, np.ndarray]] = {}
+
+    def get(compensated: bool, output_mode: str = "attitude") -> tuple[np.ndarray, np.ndarray]:
+        if (compensated, output_mode) not in done:
+            done[compensated, output_mode] = _flown(tmp_path_factory.mktemp("flight"), compensated, output_mode)
+        return done[compensated, output_mode]
+
+    return get
+
+
+def _fly(flown: Callable[..., tuple[np.ndarray, np.ndarray]], compensated: bool) -> tuple[float, float]:
+    ct, err = flown(compensated)
     return math.sqrt(float(np.mean(ct**2))), float(np.mean(err))
 
 
 @pytest.mark.integration
-def test_compensation_beats_the_uncompensated_law_on_a_realistic_vehicle(tmp_path: Path) -> None:
-    ct_c, mean_c = _fly(tmp_path, True)
-    ct_b, mean_b = _fly(tmp_path, False)
+def test_compensation_beats_the_uncompensated_law_on_a_realistic_vehicle(flown) -> None:
+    ct_c, mean_c = _fly(flown, True)
+    ct_b, mean_b = _fly(flown, False)
     print(f"\ncompensated: {100 * ct_c:.1f} cm RMS, mean speed error {100 * mean_c:+.1f} cm/s; "
           f"uncompensated 1.5 Hz: {100 * ct_b:.1f} cm, {100 * mean_b:+.1f} cm/s")  # fmt: skip
     assert ct_c < 0.05  # the real SITL: 2.8 cm
@@ -68,7 +83,7 @@ def test_compensation_beats_the_uncompensated_law_on_a_realistic_vehicle(tmp_pat
 
 @pytest.mark.integration
 @pytest.mark.parametrize("output_mode", ["attitude", "rates"])
-def test_one_lead_not_two_in_attitude_and_rates_output(tmp_path: Path, output_mode: str) -> None:
+def test_one_lead_not_two_in_attitude_and_rates_output(flown, output_mode: str) -> None:
     """ArduPilot honours roll/pitch rate feed-forward next to an attitude target, and in rates
     output the app's own attitude loop adds it: with the compensator's lag lead in the setpoint as
     well, the path was led twice (seed 0: 2.1 cm, 3.3 cm/s in attitude, 1.9 cm, 2.8 cm/s in rates).
@@ -76,7 +91,7 @@ def test_one_lead_not_two_in_attitude_and_rates_output(tmp_path: Path, output_mo
     within 1 cm and 1.5 cm/s (measured 0.7 cm, 0.9 / 0.8 cm/s; the real ArduCopter SITL, velocity
     correction 0.5 s, went from 2.0 cm, 2.1 cm/s to 1.6 cm, 1.1 cm/s in attitude and from 2.7 cm,
     2.9 cm/s to 1.4 cm, 1.1 cm/s in rates)."""
-    ct, err = _flown(tmp_path, True, output_mode)
+    ct, err = flown(True, output_mode)
     ct_rms, err_rms = math.sqrt(float(np.mean(ct**2))), math.sqrt(float(np.mean(err**2)))
     print(f"\n{output_mode}: {100 * ct_rms:.2f} cm RMS, speed error {100 * err_rms:.2f} cm/s RMS")
     assert ct_rms < 0.01

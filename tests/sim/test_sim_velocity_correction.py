@@ -39,19 +39,25 @@ def _fly(tmp: Path, corrected: bool, time_constant_s: float | None = None) -> fl
     return math.sqrt(float(np.mean(np.square(ct))))
 
 
+@pytest.fixture(scope="module")
+def shipped(tmp_path_factory: pytest.TempPathFactory) -> float:
+    """The flight as shipped, which both tests compare with: flown once (seeded, deterministic)."""
+    return _fly(tmp_path_factory.mktemp("shipped"), True)
+
+
 @pytest.mark.integration
-def test_velocity_correction_removes_the_ekf_velocity_bias_in_closed_loop(tmp_path: Path) -> None:
-    corrected, reported = _fly(tmp_path, True), _fly(tmp_path, False)
+def test_velocity_correction_removes_the_ekf_velocity_bias_in_closed_loop(tmp_path: Path, shipped: float) -> None:
+    corrected, reported = shipped, _fly(tmp_path, False)
     print(f"\npx4-sih, px4-sih.yaml: corrected {100 * corrected:.1f} cm RMS, velocity as reported {100 * reported:.1f} cm")
     assert corrected < 0.05  # issue 8's target
     assert corrected < 0.5 * reported
 
 
 @pytest.mark.integration
-def test_shipped_time_constant_flies_closer_than_the_earlier_one(tmp_path: Path) -> None:
+def test_shipped_time_constant_flies_closer_than_the_earlier_one(tmp_path: Path, shipped: float) -> None:
     """0.3 s takes the position's content up to about 0.5 Hz, where EKF2's position is the better
     of the two (docs/app.md, velocity consistency); 0.5 s flew further off the path, on the mock
     as on the real PX4 SIH, at the same speed error."""
-    shipped, earlier = _fly(tmp_path, True), _fly(tmp_path, True, 0.5)
+    earlier = _fly(tmp_path, True, 0.5)
     print(f"\npx4-sih, px4-sih.yaml: velocity correction 0.3 s {100 * shipped:.2f} cm RMS, 0.5 s {100 * earlier:.2f} cm")
     assert shipped < 0.9 * earlier
