@@ -475,7 +475,7 @@ class InnerLoopCompensator:
         new_delay = cur_delay + max(-step, min(step, delay - cur_delay))
         self.lag = (new_lag, new_lag, self.lag[2])
         if drag is not None:
-            cur, drag_step = self.drag[0], ADAPT_DRAG_SLEW * dt
+            cur = self.drag[0]
             new_drag = cur + max(-drag_step, min(drag_step, drag - cur))
             self.drag = (new_drag, new_drag, self.drag[2])
         self._hand_over_drag(drag_before)

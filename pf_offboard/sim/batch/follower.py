@@ -545,7 +545,7 @@ class _Compensator:
         new_lag = np.where(rows, new_lag, cur_lag)
         self.lag = (new_lag, new_lag, self.lag[2])
         has = rows & ~np.isnan(drag)
-        cur, drag_step = self.drag[0], ADAPT_DRAG_SLEW * dt
+        cur = self.drag[0]
         new_drag = np.where(has, cur + np.maximum(-drag_step, np.minimum(drag_step, drag - cur)), cur)
         self.drag = (new_drag, new_drag, self.drag[2])
         # InnerLoopCompensator._hand_over_drag (where the drag did not move: + 0, the same d̂)
