@@ -55,34 +55,32 @@ def _span(values: list[float], k: float = 100.0) -> list[float]:
     return [round(min(values) * k, 1), round(max(values) * k, 1)]
 
 
+def _row(autopilot: str, output: str, flights: list[dict]) -> dict:
+    return {"autopilot": autopilot, "output": output, "config": "default", "laps": 3, "flights": str(len(flights)),
+            "cross_track_rms_cm": _span([w["cross_track_rms_m"] for w in flights]),
+            "speed_error_rms_cm_s": _span([w["speed_error_rms_m_s"] for w in flights])}  # fmt: skip
+
+
 def campaign_rows(directory: Path) -> list[dict]:
     """The measured rows from a campaign's ``*/result.json`` (from activation + 8 s, completed
-    flights): per autopilot and output at the config's speed, then per autopilot with the profile
+    flights): per autopilot and output at the config's speed, then per autopilot and profile speed
     (all its outputs in one row, the mean speeds in its label)."""
-    flights: dict[tuple[str, str, float], list[dict]] = {}
+    flights: dict[tuple[str, float, str], list[dict]] = {}
     for res_file in sorted(directory.glob("*/result.json")):
         res = json.loads(res_file.read_text(encoding="utf-8"))
         spec, settled = res["spec"], ((res.get("tracking") or {}).get("settled") or {})
         if spec.get("throw") or spec.get("fast_start") or res.get("exit_code") != 0 or "cross_track_rms_m" not in settled:
             continue
-        flights.setdefault((spec["autopilot"], spec["output"], spec.get("max_speed_m_s") or 0.0), []).append(settled)
+        flights.setdefault((spec["autopilot"], spec.get("max_speed_m_s") or 0.0, spec["output"]), []).append(settled)
     rows = []
     for ap in ("arducopter", "px4"):
-        for out in OUTPUTS:
-            ws = flights.get((ap, out, 0.0))
-            if ws:
-                rows.append({"autopilot": AUTOPILOTS[ap], "output": out, "config": "default", "laps": 3, "flights": str(len(ws)),
-                             "cross_track_rms_cm": _span([w["cross_track_rms_m"] for w in ws]),
-                             "speed_error_rms_cm_s": _span([w["speed_error_rms_m_s"] for w in ws])})  # fmt: skip
-        fast = [(out, w) for (a, out, v), ws in sorted(flights.items()) if a == ap and v > 0.0 for w in ws]
-        if fast:
-            v = sorted({(a, sp) for (a, _, sp) in flights if a == ap and sp > 0.0})[0][1]
-            outs = [o for o in OUTPUTS if any(o == x for x, _ in fast)]
-            mean = _span([w["speed_mean_m_s"] for _, w in fast], 1.0)
-            rows.append({"autopilot": f"{AUTOPILOTS[ap]}, profile to {v:g} m/s ({mean[0]:.1f}–{mean[1]:.1f} m/s mean)",
-                         "output": " / ".join(outs) if len(outs) < 3 else "all three", "config": "default", "laps": 3,
-                         "flights": str(len(fast)), "cross_track_rms_cm": _span([w["cross_track_rms_m"] for _, w in fast]),
-                         "speed_error_rms_cm_s": _span([w["speed_error_rms_m_s"] for _, w in fast])})  # fmt: skip
+        rows += [_row(AUTOPILOTS[ap], out, flights[ap, 0.0, out]) for out in OUTPUTS if (ap, 0.0, out) in flights]
+        for v in sorted({sp for (a, sp, _) in flights if a == ap and sp > 0.0}):
+            outs = [out for out in OUTPUTS if (ap, v, out) in flights]
+            fast = [w for out in outs for w in flights[ap, v, out]]
+            mean = _span([w["speed_mean_m_s"] for w in fast], 1.0)
+            label = f"{AUTOPILOTS[ap]}, profile to {v:g} m/s ({mean[0]:.1f}–{mean[1]:.1f} m/s mean)"
+            rows.append(_row(label, " / ".join(outs) if len(outs) < len(OUTPUTS) else "all three", fast))
     return rows
 
 
