@@ -348,6 +348,16 @@ def _passes(ub: NDArray[np.float64], feas: _Feasible, ds: float, closed: bool) -
     bl = ub.tolist()
     n = len(bl)
     interval = feas.interval
+
+    def bound(k: int, side: int, at_start: list[float], b0: list[float]) -> float:
+        """Point k's interval end ``side`` (0: lo, 1: hi; 0 where infeasible) at its current b:
+        the sweep's start evaluation unless the sweep lowered it since."""
+        b = bl[k]
+        if b == b0[k]:
+            return at_start[k]
+        iv = interval(k, b)
+        return iv[side] if iv is not None else 0.0
+
     for _ in range(4 if closed else 1):
         changed = False
         # forward: what the vehicle can reach accelerating
@@ -357,13 +367,7 @@ def _passes(ub: NDArray[np.float64], feas: _Feasible, ds: float, closed: bool) -
         rng = range(n) if closed else range(n - 1)
         for i in rng:
             j = i + 1 if i + 1 < n else 0
-            bi = bl[i]
-            if bi == b0[i]:
-                hi = hi0[i]
-            else:
-                iv = interval(i, bi)
-                hi = iv[1] if iv is not None else 0.0
-            lim = bi + 2.0 * max(hi, 0.0) * ds
+            lim = bl[i] + 2.0 * max(bound(i, 1, hi0, b0), 0.0) * ds
             if bl[j] > lim:
                 bl[j] = lim
                 changed = True
@@ -373,13 +377,7 @@ def _passes(ub: NDArray[np.float64], feas: _Feasible, ds: float, closed: bool) -
         lo0 = np.where(oks, los, 0.0).tolist()
         for i in (range(n - 1, -1, -1) if closed else range(n - 2, -1, -1)):
             j = i + 1 if i + 1 < n else 0
-            bj = bl[j]
-            if bj == b0[j]:
-                lo = lo0[j]
-            else:
-                iv = interval(j, bj)
-                lo = iv[0] if iv is not None else 0.0
-            lim = bj - 2.0 * min(lo, 0.0) * ds
+            lim = bl[j] - 2.0 * min(bound(j, 0, lo0, b0), 0.0) * ds
             if bl[i] > lim:
                 bl[i] = lim
                 changed = True
