@@ -6,8 +6,9 @@ Prints the planned lap (or start-to-end) time and mean speed with the config's s
 (or ``{max_speed_m_s: --max-speed}``) and vehicle model, beside the point-mass time under the
 same acceleration limits (no jerk, no body-rate bound), the same with the whole share of the
 limits (accel_share 1, ideal inner loop), the vehicle's bound (:func:`vehicle_lap_time_bound`),
-the profile with each bound relaxed in turn, and the share of the time each constraint is
-active on the grid (within 1 %).
+the profile with each bound relaxed in turn (the jerk: the spec's and the inner loop's
+``response_jerk_m_s3`` together), and the share of the time each constraint is active on the grid
+(within 1 %).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ def main() -> None:
     spec = cfg.speed_profile or SpeedProfileSpec(max_speed_m_s=args.max_speed)
     f = PathFollower.from_config(dataclasses.replace(cfg, speed_profile=spec))
     path, lim, prof = f.path, f.limits, f.profile
-    direction, r, L = prof.direction, prof.response_s, path.length_m
+    direction, r, jr, L = prof.direction, prof.response_s, prof.jerk_response_s, path.length_m
     share = response_share(spec.accel_share, r)
 
     def line(label: str, t: float) -> None:
@@ -46,27 +47,29 @@ def main() -> None:
     line("point mass at the profile's share (no jerk / rate bound)", prof.stats.point_mass_time_s)
     line("point mass at accel_share 1, ideal inner loop", point_mass_lap_time(path, dataclasses.replace(spec, accel_share=1.0), lim, direction))
     line("vehicle bound (whole thrust set, no tangential-accel cap)", vehicle_lap_time_bound(path, lim, spec.max_speed_m_s, direction))
-    for label, kw in (("jerk x2", {"max_tangential_jerk_m_s3": 2 * spec.max_tangential_jerk_m_s3}),
-                      ("body rate x2", {"max_body_rate_rad_s": 2 * spec.max_body_rate_rad_s}),
-                      ("jerk x2 and body rate x2", {"max_tangential_jerk_m_s3": 2 * spec.max_tangential_jerk_m_s3,
-                                                    "max_body_rate_rad_s": 2 * spec.max_body_rate_rad_s}),
-                      ("tangential accel x2", {"max_tangential_accel_m_s2": 2 * spec.max_tangential_accel_m_s2}),
-                      ("accel_share 1", {"accel_share": 1.0})):  # fmt: skip
+    for label, kw, jr2 in (("jerk x2", {"max_tangential_jerk_m_s3": 2 * spec.max_tangential_jerk_m_s3}, jr / 2),
+                           ("body rate x2", {"max_body_rate_rad_s": 2 * spec.max_body_rate_rad_s}, jr),
+                           ("jerk x2 and body rate x2", {"max_tangential_jerk_m_s3": 2 * spec.max_tangential_jerk_m_s3,
+                                                         "max_body_rate_rad_s": 2 * spec.max_body_rate_rad_s}, jr / 2),
+                           ("tangential accel x2", {"max_tangential_accel_m_s2": 2 * spec.max_tangential_accel_m_s2}, jr),
+                           ("accel_share 1", {"accel_share": 1.0}, jr)):  # fmt: skip
         s2 = dataclasses.replace(spec, **kw)
-        line(f"planned, {label}", SpeedProfile(path, s2, lim, direction, r).stats.travel_time_s)
+        line(f"planned, {label}", SpeedProfile(path, s2, lim, direction, r, jerk_response_s=jr2).stats.travel_time_s)
     # each bound relaxed in turn to (about) no bound, then every bound but the share relaxed, then
     # the share at its whole (ideal inner loop) with each other bound relaxed in turn
     free = {"jerk": {"max_tangential_jerk_m_s3": 1000.0, "max_body_rate_rad_s": 20.0},
             "body rate": {"max_body_rate_rad_s": 20.0},
             "tangential accel": {"max_tangential_accel_m_s2": 50.0}}
     print("  each bound relaxed in turn (jerk: with the body rate too, which caps the jerk planned):")
-    for share_label, share_kw, resp in (("at the profile's share", {}, r), ("at the whole share (1, ideal loop)", {"accel_share": 1.0}, 0.0)):
-        line(f"{share_label}: all bounds", SpeedProfile(path, dataclasses.replace(spec, **share_kw), lim, direction, resp).stats.travel_time_s)
+    for share_label, share_kw, resp, jresp in (("at the profile's share", {}, r, jr),
+                                               ("at the whole share (1, ideal loop)", {"accel_share": 1.0}, 0.0, 0.0)):  # fmt: skip
+        line(f"{share_label}: all bounds", SpeedProfile(path, dataclasses.replace(spec, **share_kw), lim, direction, resp, jerk_response_s=jresp).stats.travel_time_s)
         for label, kw in free.items():
             s2 = dataclasses.replace(spec, **share_kw, **kw)
-            line(f"{share_label}: no {label} bound", SpeedProfile(path, s2, lim, direction, resp).stats.travel_time_s)
+            jr2 = 0.0 if label == "jerk" else jresp
+            line(f"{share_label}: no {label} bound", SpeedProfile(path, s2, lim, direction, resp, jerk_response_s=jr2).stats.travel_time_s)
         s2 = dataclasses.replace(spec, **share_kw, **free["jerk"], **free["tangential accel"])
-        line(f"{share_label}: none but the share", SpeedProfile(path, s2, lim, direction, resp).stats.travel_time_s)
+        line(f"{share_label}: none but the share", SpeedProfile(path, s2, lim, direction, resp, jerk_response_s=0.0).stats.travel_time_s)
     # which constraint is active where (travel order, as the profile's grid)
     geo = _geometry(path, spec, direction)
     feas = _Feasible(geo, lim, spec, r)

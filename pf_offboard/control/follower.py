@@ -330,7 +330,8 @@ class PathFollower:
     def _identified_profile(self) -> SpeedProfile | None:
         """The speed profile flown once the compensator's identifier adopts a model with the
         model's lag: its dead time is then predicted by the identified amount, so the share of the
-        limits is discounted for the lag only (``profile.py``, ``response_share``); None when
+        limits is discounted for the lag only (``profile.py``, ``response_share``); the jerk stays
+        planned for the model's lag + dead time (``JERK_RESPONSE_BUDGET_M_S2``). None when
         nothing can be identified or the plan would not change."""
         spec, comp = self._speed_profile_spec, self.compensator
         if spec is None or comp is None or getattr(comp, "identifier", None) is None:
@@ -338,7 +339,7 @@ class PathFollower:
         response_s = max(self.vehicle.accel_lag_xy_s, self.vehicle.accel_lag_z_s)
         if response_s >= self._response_s:
             return None
-        return SpeedProfile(self.path, spec, self.limits, self.speed, response_s, like=self.profile)
+        return SpeedProfile(self.path, spec, self.limits, self.speed, response_s, like=self.profile, jerk_response_s=self._response_s)
 
     @classmethod
     def paper(

@@ -70,6 +70,22 @@ RESPONSE_REFERENCE_S = 0.5
 # still exceeded. 0.5 keeps the planned speed non-decreasing in the jerk bound (0.7 did not at
 # accel_share 1) and leaves the defaults (10 m/s^3, 3 rad/s -> 14.7) unchanged.
 JERK_RATE_SHARE = 0.5
+# The inner loop's response (lag + dead time, s) bounds the jerk too: the smoothing plans with at
+# most JERK_RESPONSE_BUDGET_M_S2 / response. A reference whose tangential acceleration turns at J
+# (the speed's peaks between two corners, the braking into them) leaves about J x response of that
+# acceleration unflown, and the vehicle enters the next corner too fast: its centripetal demand
+# grows with the speed squared, the tilt saturates and no braking is left (real PX4 SIH, held-out
+# figure-eight at max 3 m/s, 10 m/s^3: 20-36 cm off the path at the corner after a speed peak in
+# 3 of 8 flights). The budget is planned with the response before any identification (the model's
+# lag + dead time) in both plans: predicting the dead time keeps the feedback stable, but the
+# vehicle still flies each change of acceleration that much later.
+JERK_RESPONSE_BUDGET_M_S2 = 1.2
+
+
+def response_jerk_m_s3(response_s: float) -> float:
+    """The largest jerk (m/s^3) a reference may plan for an inner loop answering after
+    ``response_s`` (lag + dead time; unbounded for the paper's ideal loop, 0)."""
+    return math.inf if response_s <= 0.0 else JERK_RESPONSE_BUDGET_M_S2 / response_s
 # Once the compensator flies an identified model with the model's lag (its dead time predicted by
 # the identified amount, its gain and drag inverted: InnerLoopCompensator.identified), the share is
 # discounted for the lag only: the follower re-plans with response_share(accel_share, lag),
@@ -104,7 +120,9 @@ class SpeedProfileSpec:
     interpolated linearly over eta1 (constant beyond an open path's table, periodic on a closed
     one). ``max_tangential_accel_m_s2`` / ``max_tangential_jerk_m_s3``: bounds on dV/dt and
     d2V/dt2 along the path (the smoothing plans with at most ``JERK_RATE_SHARE *
-    max_body_rate_rad_s * g``: a larger jerk alone would turn the thrust vector too fast). ``accel_share``: share (0, 1] of the limits the reference motion may
+    max_body_rate_rad_s * g``: a larger jerk alone would turn the thrust vector too fast; and at
+    most ``JERK_RESPONSE_BUDGET_M_S2 / response``: a slower inner loop flies a jerkier reference
+    later). ``accel_share``: share (0, 1] of the limits the reference motion may
     use; the rest is the feedback's margin. ``max_body_rate_rad_s``: the speed is capped where the
     path's own jerk ``|sigma_sss| V^3`` would turn the thrust vector (|f| ~ g) faster than this
     (rates mode bounds the commanded rates: 3.5 rad/s by default).
@@ -505,15 +523,18 @@ class SpeedProfile:
     """
 
     def __init__(self, path: Path, spec: SpeedProfileSpec, limits: Limits, direction: float, response_s: float = 0.0,
-                 like: SpeedProfile | None = None) -> None:  # fmt: skip
+                 like: SpeedProfile | None = None, jerk_response_s: float | None = None) -> None:  # fmt: skip
         """``response_s``: the inner loop's lag + delay (s; 0: the paper's ideal one), which lowers
-        the share of the limits the reference uses (:func:`response_share`). ``like``: a profile
-        planned on the same path whose sampling of the path is reused (the same plan, computed
-        faster; ignored if its path or direction differ)."""
+        the share of the limits the reference uses (:func:`response_share`) and the jerk it plans
+        (:func:`response_jerk_m_s3`; ``jerk_response_s``, when given, for the jerk instead).
+        ``like``: a profile planned on the same path whose sampling of the path is reused (the
+        same plan, computed faster; ignored if its path or direction differ)."""
         self.spec = spec
         self.response_s = float(response_s)
-        # the jerk the smoothing plans with (see JERK_RATE_SHARE)
-        self.jerk_bound_m_s3 = min(spec.max_tangential_jerk_m_s3, JERK_RATE_SHARE * spec.max_body_rate_rad_s * G)
+        self.jerk_response_s = self.response_s if jerk_response_s is None else float(jerk_response_s)
+        # the jerk the smoothing plans with (see JERK_RATE_SHARE and JERK_RESPONSE_BUDGET_M_S2)
+        self.jerk_bound_m_s3 = min(spec.max_tangential_jerk_m_s3, JERK_RATE_SHARE * spec.max_body_rate_rad_s * G,
+                                   response_jerk_m_s3(self.jerk_response_s))  # fmt: skip
         self.direction = 1.0 if direction >= 0.0 else -1.0
         self.closed = bool(path.closed)
         self.length_m = float(path.length_m)
