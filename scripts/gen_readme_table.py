@@ -63,7 +63,7 @@ def _row(autopilot: str, output: str, flights: list[dict]) -> dict:
 
 def campaign_rows(directory: Path) -> list[dict]:
     """The measured rows from a campaign's ``*/result.json`` (from activation + 8 s, completed
-    flights): per autopilot and output at the config's speed, then per autopilot and profile speed
+    flights with a speed measured in that window): per autopilot and output at the config's speed, then per autopilot and profile speed
     (all its outputs in one row, the mean speeds in its label)."""
     flights: dict[tuple[str, float, str], list[dict]] = {}
     for res_file in sorted(directory.glob("*/result.json")):
@@ -71,6 +71,8 @@ def campaign_rows(directory: Path) -> list[dict]:
         spec, settled = res["spec"], ((res.get("tracking") or {}).get("settled") or {})
         if spec.get("throw") or spec.get("fast_start") or res.get("exit_code") != 0 or "cross_track_rms_m" not in settled:
             continue
+        if settled.get("speed_error_rms_m_s") is None or settled.get("speed_mean_m_s") is None:
+            continue  # no speed measured in the window (e.g. a clock jump cut the log short): not a completed measure
         flights.setdefault((spec["autopilot"], spec.get("max_speed_m_s") or 0.0, spec["output"]), []).append(settled)
     rows = []
     for ap in ("arducopter", "px4"):

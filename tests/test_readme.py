@@ -40,7 +40,8 @@ def test_readme_real_autopilot_table_is_generated_from_its_data():
 
 def test_readme_rows_come_from_a_campaigns_results(tmp_path):
     """``--from-campaign``: one row per autopilot and output at the config's speed, one per
-    autopilot with the profile (mean speeds in its label); failed flights and starts left out."""
+    autopilot with the profile (mean speeds in its label); failed flights, starts and flights without a
+    speed measured in the window left out."""
     import importlib.util
     import json
 
@@ -62,6 +63,7 @@ def test_readme_rows_come_from_a_campaigns_results(tmp_path):
     flight("d", "px4", "rates", 3.0, 0.062, 0.15, 2.27)
     flight("e", "px4", "acceleration", 3.0, 0.05, 0.12, 2.81)
     flight("f", "arducopter", "rates", None, 0.01, 0.02, 1.5, throw=[1, 2])  # a start, not a row
+    flight("g", "px4", "rates", 3.0, 0.015, None, None)  # no speed in the window: not a measure
     rows = gen.campaign_rows(tmp_path)
     assert rows == [
         {"autopilot": "PX4 SIH", "output": "attitude", "config": "default", "laps": 3, "flights": "2",
