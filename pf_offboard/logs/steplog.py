@@ -62,19 +62,21 @@ class StepRecord:
     event: str = ""  # "", "activated", "takeover", ...
 
     def __post_init__(self) -> None:
+        # written into the instance's __dict__ (what object.__setattr__ does for a frozen dataclass
+        # without slots), field by field in order: this runs once per controller step
+        d = self.__dict__
         for name, kind, size in _KINDS:
-            value = getattr(self, name)
-            if kind == "vec":
-                vec = tuple(map(float, value))
+            if kind == "float":
+                d[name] = float(d[name])
+            elif kind == "vec":
+                vec = tuple(map(float, d[name]))
                 if len(vec) != size:
                     raise ValueError(f"StepRecord.{name}: expected {size} components, got {len(vec)}")
-                object.__setattr__(self, name, vec)
+                d[name] = vec
             elif kind == "bool":
-                object.__setattr__(self, name, bool(value))
-            elif kind == "str":
-                object.__setattr__(self, name, str(value))
+                d[name] = bool(d[name])
             else:
-                object.__setattr__(self, name, float(value))
+                d[name] = str(d[name])
 
 
 _VECTOR_SIZES: dict[str, int] = {
@@ -115,16 +117,17 @@ COLUMNS: tuple[str, ...] = _columns()
 def record_to_row(record: StepRecord) -> list[str]:
     """Flat CSV cells of one record (floats as ``repr``, bools as 0/1)."""
     row: list[str] = []
-    for f in _FIELDS:
-        value = getattr(record, f.name)
-        if f.name in _VECTOR_SIZES:
-            row.extend(repr(float(x)) for x in value)
-        elif f.name in _BOOL_FIELDS:
-            row.append("1" if value else "0")
-        elif f.name in _STR_FIELDS:
-            row.append(value)
-        else:
+    d = record.__dict__
+    for name, kind, _ in _KINDS:
+        value = d[name]
+        if kind == "float":
             row.append(repr(float(value)))
+        elif kind == "vec":
+            row += [repr(float(x)) for x in value]
+        elif kind == "bool":
+            row.append("1" if value else "0")
+        else:
+            row.append(value)
     return row
 
 
