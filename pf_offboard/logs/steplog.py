@@ -181,20 +181,16 @@ def row_to_record(row: Sequence[str], where: str) -> StepRecord:
     """Parse one CSV row (already checked to have ``len(COLUMNS)`` cells)."""
     values: dict[str, object] = {}
     i = 0
-    for f in _FIELDS:
-        if f.name in _VECTOR_SIZES:
-            size = _VECTOR_SIZES[f.name]
-            values[f.name] = tuple(_parse_float(row[i + k], where, COLUMNS[i + k]) for k in range(size))
-            i += size
-        elif f.name in _BOOL_FIELDS:
-            values[f.name] = _parse_bool(row[i], where, COLUMNS[i])
-            i += 1
-        elif f.name in _STR_FIELDS:
-            values[f.name] = row[i]
-            i += 1
+    for name, kind, size in _KINDS:
+        if kind == "float":
+            values[name] = _parse_float(row[i], where, COLUMNS[i])
+        elif kind == "vec":
+            values[name] = tuple([_parse_float(row[i + k], where, COLUMNS[i + k]) for k in range(size)])
+        elif kind == "bool":
+            values[name] = _parse_bool(row[i], where, COLUMNS[i])
         else:
-            values[f.name] = _parse_float(row[i], where, COLUMNS[i])
-            i += 1
+            values[name] = row[i]
+        i += size
     return StepRecord(**values)  # type: ignore[arg-type]
 
 
@@ -221,8 +217,9 @@ def read_steplog(path: str | Path) -> list[StepRecord]:
         detail = f"missing {missing[:3]}" if missing else f"unexpected {extra[:3]}" if extra else "columns out of order"
         raise LogError(f"{p} row 1", f"not a pf-offboard step-log header ({detail})")
     records: list[StepRecord] = []
+    name = str(p)
     for row_no, row in enumerate(reader, start=2):
-        where = f"{p} row {row_no}"
+        where = f"{name} row {row_no}"
         if len(row) != len(COLUMNS):
             raise LogError(where, f"expected {len(COLUMNS)} cells, got {len(row)} (truncated or corrupt row)")
         records.append(row_to_record(row, where))
