@@ -55,8 +55,9 @@ def frd_to_flu(v_frd: ArrayLike) -> NDArray[np.float64]:
 
 def quat_multiply(q: ArrayLike, r: ArrayLike) -> NDArray[np.float64]:
     """Hamilton product q * r of (w, x, y, z) quaternions."""
-    w0, x0, y0, z0 = np.asarray(q, dtype=float)
-    w1, x1, y1, z1 = np.asarray(r, dtype=float)
+    # on Python floats (the same IEEE products and sums as on NumPy scalars, without their overhead)
+    w0, x0, y0, z0 = np.asarray(q, dtype=float).tolist()
+    w1, x1, y1, z1 = np.asarray(r, dtype=float).tolist()
     return np.array(
         [
             w0 * w1 - x0 * x1 - y0 * y1 - z0 * z1,

@@ -103,7 +103,7 @@ def rotate(q_wxyz: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.fl
 
 def _unit_quat(q: Any) -> NDArray[np.float64] | None:
     a = np.asarray(q, dtype=float)
-    if a.shape != (4,) or not np.all(np.isfinite(a)):
+    if a.shape != (4,) or not all(map(math.isfinite, a.tolist())):
         return None
     n = float(np.linalg.norm(a))
     if abs(n - 1.0) > 1e-2:  # MAVLink quaternions are unit; anything else is corrupt

@@ -73,7 +73,7 @@ def _positive(name: str, value: float, lo: float, hi: float) -> float:
 
 def _quat4(name: str, q: ArrayLike) -> tuple[float, float, float, float]:
     a = np.asarray(q, dtype=float).reshape(-1)
-    if a.shape != (4,) or not np.all(np.isfinite(a)):
+    if a.shape != (4,) or not all(map(math.isfinite, a.tolist())):
         raise ValueError(f"{name}: need a finite (w, x, y, z) quaternion, got {q!r}")
     n = math.sqrt(float(a @ a))
     if n < 1e-9:

@@ -62,19 +62,21 @@ class StepRecord:
     event: str = ""  # "", "activated", "takeover", ...
 
     def __post_init__(self) -> None:
+        # written into the instance's __dict__ (what object.__setattr__ does for a frozen dataclass
+        # without slots), field by field in order: this runs once per controller step
+        d = self.__dict__
         for name, kind, size in _KINDS:
-            value = getattr(self, name)
-            if kind == "vec":
-                vec = tuple(map(float, value))
+            if kind == "float":
+                d[name] = float(d[name])
+            elif kind == "vec":
+                vec = tuple(map(float, d[name]))
                 if len(vec) != size:
                     raise ValueError(f"StepRecord.{name}: expected {size} components, got {len(vec)}")
-                object.__setattr__(self, name, vec)
+                d[name] = vec
             elif kind == "bool":
-                object.__setattr__(self, name, bool(value))
-            elif kind == "str":
-                object.__setattr__(self, name, str(value))
+                d[name] = bool(d[name])
             else:
-                object.__setattr__(self, name, float(value))
+                d[name] = str(d[name])
 
 
 _VECTOR_SIZES: dict[str, int] = {
@@ -115,16 +117,17 @@ COLUMNS: tuple[str, ...] = _columns()
 def record_to_row(record: StepRecord) -> list[str]:
     """Flat CSV cells of one record (floats as ``repr``, bools as 0/1)."""
     row: list[str] = []
-    for f in _FIELDS:
-        value = getattr(record, f.name)
-        if f.name in _VECTOR_SIZES:
-            row.extend(repr(float(x)) for x in value)
-        elif f.name in _BOOL_FIELDS:
-            row.append("1" if value else "0")
-        elif f.name in _STR_FIELDS:
-            row.append(value)
-        else:
+    d = record.__dict__
+    for name, kind, _ in _KINDS:
+        value = d[name]
+        if kind == "float":
             row.append(repr(float(value)))
+        elif kind == "vec":
+            row += [repr(float(x)) for x in value]
+        elif kind == "bool":
+            row.append("1" if value else "0")
+        else:
+            row.append(value)
     return row
 
 
@@ -178,20 +181,16 @@ def row_to_record(row: Sequence[str], where: str) -> StepRecord:
     """Parse one CSV row (already checked to have ``len(COLUMNS)`` cells)."""
     values: dict[str, object] = {}
     i = 0
-    for f in _FIELDS:
-        if f.name in _VECTOR_SIZES:
-            size = _VECTOR_SIZES[f.name]
-            values[f.name] = tuple(_parse_float(row[i + k], where, COLUMNS[i + k]) for k in range(size))
-            i += size
-        elif f.name in _BOOL_FIELDS:
-            values[f.name] = _parse_bool(row[i], where, COLUMNS[i])
-            i += 1
-        elif f.name in _STR_FIELDS:
-            values[f.name] = row[i]
-            i += 1
+    for name, kind, size in _KINDS:
+        if kind == "float":
+            values[name] = _parse_float(row[i], where, COLUMNS[i])
+        elif kind == "vec":
+            values[name] = tuple([_parse_float(row[i + k], where, COLUMNS[i + k]) for k in range(size)])
+        elif kind == "bool":
+            values[name] = _parse_bool(row[i], where, COLUMNS[i])
         else:
-            values[f.name] = _parse_float(row[i], where, COLUMNS[i])
-            i += 1
+            values[name] = row[i]
+        i += size
     return StepRecord(**values)  # type: ignore[arg-type]
 
 
@@ -218,8 +217,9 @@ def read_steplog(path: str | Path) -> list[StepRecord]:
         detail = f"missing {missing[:3]}" if missing else f"unexpected {extra[:3]}" if extra else "columns out of order"
         raise LogError(f"{p} row 1", f"not a pf-offboard step-log header ({detail})")
     records: list[StepRecord] = []
+    name = str(p)
     for row_no, row in enumerate(reader, start=2):
-        where = f"{p} row {row_no}"
+        where = f"{name} row {row_no}"
         if len(row) != len(COLUMNS):
             raise LogError(where, f"expected {len(COLUMNS)} cells, got {len(row)} (truncated or corrupt row)")
         records.append(row_to_record(row, where))

@@ -12,30 +12,29 @@ deterministic in-process flight."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from pf_offboard.cli import main
 from pf_offboard.logs.steplog import read_steplog
 
 pytestmark = pytest.mark.integration
 
 
-def _demo(log_dir: Path, *flags: str) -> str:
-    done = subprocess.run(
-        [sys.executable, "-m", "pf_offboard", "demo", "--no-plots", "--quiet", "--log-dir", str(log_dir), *flags],
-        capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    return done.stderr
+def _demo(capsys: pytest.CaptureFixture[str], log_dir: Path, *flags: str) -> str:
+    """The command's stderr. Run through the console script's entry point in process (no interpreter
+    start-up per demo; `python -m pf_offboard demo` itself: tests/app/test_fly_integration.py)."""
+    code = main(["demo", "--no-plots", "--quiet", "--log-dir", str(log_dir), *flags])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    return err
 
 
 @pytest.mark.parametrize("output", ["acceleration", "attitude", "rates"])
-def test_demo_flies_the_realistic_vehicle_within_issue_8s_targets(tmp_path: Path, output: str) -> None:
-    err = _demo(tmp_path, "--output", output)
+def test_demo_flies_the_realistic_vehicle_within_issue_8s_targets(tmp_path: Path, capsys: pytest.CaptureFixture[str], output: str) -> None:
+    err = _demo(capsys, tmp_path, "--output", output)
     assert "vehicle px4-sih" in err and "px4-sih.yaml" in err and "2 laps done; handed back in AUTO.LOITER" in err, err
     recs = [r for r in read_steplog(tmp_path / "flight.csv") if r.mode == "following"]
     late = [r for r in recs if r.time_s >= recs[0].time_s + 8.0]
@@ -49,8 +48,8 @@ def test_demo_flies_the_realistic_vehicle_within_issue_8s_targets(tmp_path: Path
     assert rms_ct > 0.005
 
 
-def test_demo_ideal_vehicle_is_asked_for_by_name(tmp_path: Path) -> None:
-    err = _demo(tmp_path, "--vehicle", "fast", "--laps", "1")
+def test_demo_ideal_vehicle_is_asked_for_by_name(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    err = _demo(capsys, tmp_path, "--vehicle", "fast", "--laps", "1")
     assert "vehicle fast" in err and "paper.yaml" in err, err
     recs = [r for r in read_steplog(tmp_path / "flight.csv") if r.mode == "following"]
     late = [r for r in recs if r.time_s >= recs[0].time_s + 3.0]
