@@ -63,8 +63,9 @@ def _row(autopilot: str, output: str, flights: list[dict]) -> dict:
 
 def campaign_rows(directory: Path) -> list[dict]:
     """The measured rows from a campaign's ``*/result.json`` (from activation + 8 s, completed
-    flights with a speed measured in that window): per autopilot and output at the config's speed, then per autopilot and profile speed
-    (all its outputs in one row, the mean speeds in its label)."""
+    flights with a speed measured in that window): per autopilot and output at the config's speed,
+    then per autopilot and profile speed (all its outputs in one row, the mean speeds in its
+    label)."""
     flights: dict[tuple[str, float, str], list[dict]] = {}
     for res_file in sorted(directory.glob("*/result.json")):
         res = json.loads(res_file.read_text(encoding="utf-8"))

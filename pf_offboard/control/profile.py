@@ -76,9 +76,10 @@ JERK_RATE_SHARE = 0.5
 # acceleration unflown, and the vehicle enters the next corner too fast: its centripetal demand
 # grows with the speed squared, the tilt saturates and no braking is left (real PX4 SIH, held-out
 # figure-eight at max 3 m/s: at 10 m/s^3 9 of 20 flights went over 20 cm off the path, up to 34 cm,
-# at the corner after a speed peak; at 6 m/s^3 none of 28, at 7 % less mean speed). The budget is planned with the response before any identification (the model's
-# lag + dead time) in both plans: predicting the dead time keeps the feedback stable, but the
-# vehicle still flies each change of acceleration that much later.
+# at the corner after a speed peak; at 6 m/s^3 none of 28, at 7 % less mean speed). The budget is
+# planned with the response before any identification (the model's lag + dead time) in both
+# plans: predicting the dead time keeps the feedback stable, but the vehicle still flies each
+# change of acceleration that much later.
 JERK_RESPONSE_BUDGET_M_S2 = 1.2
 
 

@@ -243,9 +243,9 @@ def test_the_share_and_the_inner_loops_jerk_cap_the_plan_on_a_tight_path() -> No
     figure-eight with the typical model: relaxing the body rate or the tangential acceleration
     gains at most 4 % (measured 2.09 -> 2.08 / 2.09 m/s); the jerk (the spec's, the body rate that
     caps it and the inner loop's response_jerk_m_s3) 9 % (2.27); the whole share with an ideal
-    inner loop 16 % (2.43); no relaxation plans more than 1 % slower (the smoothing is a linearised
-    programme: relaxing the body rate plans 0.5 % slower) and none beats the
-    vehicle's point-mass bound (5.00 s)."""
+    inner loop 16 % (2.43); no relaxation plans more than 0.6 % slower (the smoothing is a
+    linearised programme: relaxing the body rate plans 0.5 % slower) and none beats the vehicle's
+    point-mass bound (5.00 s)."""
     cfg = ROOT / "tests" / "real_sitl" / "configs" / "figure8-tilted.yaml"
     base = SpeedProfileSpec(3.0)
     f = _follower(cfg, base)
@@ -267,7 +267,7 @@ def test_the_share_and_the_inner_loops_jerk_cap_the_plan_on_a_tight_path() -> No
     print(f"planned {f.path.length_m / t0:.2f} m/s; relaxed {({k: round(f.path.length_m / t, 2) for k, t in relaxed.items()})}; "
           f"jerk {f.path.length_m / jerk:.2f}; whole share {f.path.length_m / whole_share:.2f}; vehicle bound {f.path.length_m / bound:.2f}")  # fmt: skip
     for t in (*relaxed.values(), jerk, whole_share):
-        assert bound * 0.999 <= t <= t0 * 1.01
+        assert bound * 0.999 <= t <= t0 * 1.006
     assert all(t >= t0 / 1.04 for t in relaxed.values())
     assert t0 / 1.10 <= jerk <= t0 / 1.02
     assert whole_share <= t0 / 1.10
