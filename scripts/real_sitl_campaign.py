@@ -44,9 +44,11 @@ HOME = "-35.363261,149.165230,584,353"
 
 # ------------------------------------------------------------------------------------ SITL control
 def start_sitl(autopilot: str, workdir: Path, params: dict[str, float] | None = None,
-               px4_env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
-    """A fresh SITL in ``workdir`` (its own session; stop with :func:`stop_sitl`); ``px4_env``: extra
-    environment for PX4 (e.g. PX4_SIH_NOISE_SCALE, read by a SIH patched to scale its sensor noise)."""
+               px4_env: dict[str, str] | None = None, model: str | None = None) -> subprocess.Popen[bytes]:
+    """A fresh SITL in ``workdir`` (its own session; stop with :func:`stop_sitl`); ``params``: the
+    autopilot's parameters at boot (PX4: PX4_PARAM_*; ArduCopter: a defaults file after copter.parm);
+    ``px4_env``: extra environment for PX4 (e.g. PX4_SIH_NOISE_SCALE, read by a SIH patched to scale
+    its sensor noise); ``model``: ArduCopter SITL's frame (``--model``, default "+")."""
     workdir.mkdir(parents=True, exist_ok=True)
     log = (workdir / f"{autopilot}.log").open("wb")
     env = dict(os.environ)
@@ -64,7 +66,7 @@ def start_sitl(autopilot: str, workdir: Path, params: dict[str, float] | None = 
             extra = workdir / "extra.parm"
             extra.write_text("".join(f"{k} {v}\n" for k, v in params.items()))
             defaults += "," + str(extra)
-        cmd = [str(ARDUCOPTER), "--model", "+", "--speedup", "1", "--defaults", defaults, "-I0", "--home", HOME, "-w"]
+        cmd = [str(ARDUCOPTER), "--model", model or "+", "--speedup", "1", "--defaults", defaults, "-I0", "--home", HOME, "-w"]
     # a shell stays its parent: ArduCopter SITL exits when its parent process does
     return subprocess.Popen(["bash", "-c", shlex.join(cmd) + "; true"], cwd=workdir, stdout=log, stderr=subprocess.STDOUT,
                             start_new_session=True, env=env)  # fmt: skip
@@ -175,7 +177,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         config = work / f"{config.stem}-flown.yaml"
         config.write_text(yaml.safe_dump(data, sort_keys=False))
     log_dir = work / "log"
-    sitl = start_sitl(spec["autopilot"], work / "sitl", spec.get("params"), spec.get("px4_env"))
+    sitl = start_sitl(spec["autopilot"], work / "sitl", spec.get("params"), spec.get("px4_env"), spec.get("model"))
     result: dict[str, Any] = {"spec": spec, "load_1min": [os.getloadavg()[0]]}  # a loaded machine perturbs real-time SITLs
     t0 = time.monotonic()
     launch_log = (work / "launch.log").open("w")
@@ -518,6 +520,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--app-python", help="python that runs the app (default: this one)")
     ap.add_argument("--app-path", help="PYTHONPATH for the app (another checkout)")
     ap.add_argument("--px4-param", action="append", default=[], metavar="NAME=VALUE", help="a PX4 parameter for every PX4 flight")
+    ap.add_argument("--arducopter-param", action="append", default=[], metavar="NAME=VALUE",
+                    help="an ArduCopter parameter for every ArduCopter flight (e.g. FRAME_CLASS=2 with --arducopter-model hexa)")
+    ap.add_argument("--arducopter-model", help="ArduCopter SITL's frame model (default +)")
     ap.add_argument("--px4-env", action="append", default=[], metavar="NAME=VALUE",
                     help="an environment variable for every PX4 SITL (e.g. PX4_SIH_NOISE_SCALE=0 on a SIH built to read it)")
     ap.add_argument("--tag", default="", help="appended to each flight's directory name")
@@ -588,7 +593,8 @@ def main(argv: list[str] | None = None) -> int:
                                       "max_speed_m_s": None if speed == 1.5 else speed, "laps": 3 if closed else 1,
                                       "workdir": str((args.out / tag).resolve()), "app_python": args.app_python,
                                       "app_path": args.app_path,
-                                      "params": dict(kv.split("=", 1) for kv in args.px4_param) if autopilot == "px4" else None,
+                                      "params": dict(kv.split("=", 1) for kv in (args.px4_param if autopilot == "px4" else args.arducopter_param)) or None,
+                                      "model": args.arducopter_model if autopilot == "arducopter" else None,
                                       "px4_env": dict(kv.split("=", 1) for kv in args.px4_env) if autopilot == "px4" else None})  # fmt: skip
     for spec in specs:
         queues.setdefault(spec["autopilot"], queue.Queue()).put(spec)
