@@ -241,7 +241,11 @@ class Autopilot:
 
     @property
     def hover_thrust(self) -> float:
-        return self.params[self.profile.hover_param]
+        """The hover thrust the autopilot's own controllers fly: its acceleration mapping's (the
+        parameter as written through MAVLink; PX4's hover-thrust estimate converged on it). The
+        parameter as *reported* may differ when a test sets ``params`` directly: PX4's estimator
+        never writes MPC_THR_HOVER back."""
+        return self.sim.params.hover_thrust
 
     @property
     def base_mode(self) -> int:

@@ -572,6 +572,7 @@ class Vehicle:
                 command_timeout_s=settings.command_timeout_s,
                 follow=not takeoff_only,
                 offboard_ours=self._offboard_ours,
+                measure_hover_thrust=fs.output_mode != "acceleration" and fs.hover_thrust is None and profile.hover_thrust_measured,
             )
             encoder = Encoder(
                 fs.output_mode, profile, target.system, target.component,

@@ -33,6 +33,7 @@ from pf_offboard.app.dialects import Dialect, dialect_for
 from pf_offboard.app.encoders import position_setpoint, yaw_of
 from pf_offboard.app.controllers import ECHO_MESSAGE, SETPOINT_MESSAGES, ControllerWatch
 from pf_offboard.app.estimator import StateEstimate, flight_clock_s
+from pf_offboard.app.hover import HoverThrustMeter
 from pf_offboard.app.params import Parameters
 from pf_offboard.app.phases import (
     EXIT_BREACH,
@@ -58,6 +59,9 @@ from pf_offboard.errors import LinkError
 from pf_offboard.safety import Breach, EnvelopeMonitor, Verdict
 
 KEEPALIVE_S = 0.1  # re-send the last setpoint when nothing went out for this long
+# attitude / rates on PX4: wait up to this long (wall clock) in hold for a steady window of its
+# attitude target's thrust before activation (app/hover.py; PX4 streams it at 2-10 Hz)
+HOVER_WAIT_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -81,6 +85,10 @@ class FlightOptions:
     # the vehicle is in OFFBOARD / GUIDED because this connection's previous flight left it there
     # (ArduPilot holds in GUIDED after a take-off): an airborne launch engages at once, not refused
     offboard_ours: bool = False
+    # attitude / rates output, no hover thrust in the config, and an autopilot whose parameter is
+    # not what it flies (Profile.hover_thrust_measured): before activation, the encoder's hover
+    # thrust is replaced by the one measured from the autopilot's attitude target while it holds
+    measure_hover_thrust: bool = False
 
 
 class Flight:
@@ -154,6 +162,9 @@ class Flight:
         self._safe_msg: Any = None
         # before activation, stream the follower's own (inactive) setpoints as proof of life
         self._stream_follow_before_active = False
+        # the autopilot's hover thrust from its attitude targets before activation (None: not measured)
+        self._hover_meter = HoverThrustMeter() if options.measure_hover_thrust else None
+        self._hover_event = ""  # logged with the activation: the hover thrust measured
         heartbeat = heartbeat if heartbeat is not None else link.first_heartbeat
         if heartbeat is not None:  # mode and armed state known from the start
             self._on_heartbeat(heartbeat)
@@ -259,6 +270,7 @@ class Flight:
                     return
                 self.phase = Phase.HANDING_BACK
                 return
+            await self._measure_hover_thrust(HOVER_WAIT_S)
             self._stream_follow_before_active = True
             self._activate()
             return
@@ -271,11 +283,13 @@ class Flight:
                     self._refuse_foreign_offboard()
                     return
                 # left in OFFBOARD / GUIDED by our own previous flight: whatever we send flies at once
+                await self._measure_hover_thrust(0.0)  # what we send flies at once: no waiting
                 self._engage(f"activated (airborne, already in {self.profile.offboard.name})")
             else:
                 # stream the follower's setpoints (proof of life), then switch
                 self.phase = Phase.WAITING
                 await self._proof_of_life()
+                await self._measure_hover_thrust(HOVER_WAIT_S)
                 self._engage("activated (airborne)")
             await self.commander.set_mode(self.profile.offboard)
             if self.phase is Phase.ENGAGING:
@@ -408,6 +422,11 @@ class Flight:
             if self.phase is Phase.FOLLOWING:
                 self.controllers.echoed_target(msg, self.clock())
                 self._check_controllers()
+            return
+        if kind == "ATTITUDE_TARGET" and self._hover_meter is not None:
+            est = self.pipeline.estimator.latest
+            speed = float(np.linalg.norm(est.velocity_enu_m_s)) if est is not None else None
+            self._hover_meter.add(msg.time_boot_ms / 1000.0, float(msg.thrust), speed)
             return
         if kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
@@ -567,12 +586,33 @@ class Flight:
             self.phase = Phase.HANDING_BACK
             self.waiter.notify()
 
+    async def _measure_hover_thrust(self, wait_s: float) -> None:
+        """Before activation (once): fly attitude / rates with the hover thrust the autopilot's
+        attitude target showed while it held the vehicle still (app/hover.py), waiting up to
+        ``wait_s`` (wall clock) for a steady window; without one, the parameter read at connect
+        stays, and a line says which was used."""
+        meter = self._hover_meter
+        if meter is None:
+            return
+        if wait_s > 0.0:  # (the meter keeps taking samples meanwhile)
+            await self.waiter.until(lambda: meter.hover_thrust() is not None or self.waiter.stop.is_set(), wait_s)
+        self._hover_meter = None
+        encoder, param = self.pipeline.encoder, self.profile.hover_thrust_param
+        hover = meter.hover_thrust()
+        if hover is None:
+            self.display.say(f"hover thrust {encoder.hover_thrust:g} from {param}: no steady attitude target from the autopilot in hold to measure it")
+            return
+        self.pipeline.encoder = encoder.with_hover_thrust(hover)
+        self._hover_event = f"hover_thrust_measured={hover:.3f}"
+        self.display.say(f"hover thrust {hover:.3f}, measured from the autopilot's attitude target in hold ({param} {encoder.hover_thrust:g})")
+
     def _engage(self, event: str) -> None:
         """From now on the streamed setpoints are meant to fly (mode switch requested)."""
         est = self.pipeline.estimator.latest
         self.activation_time_s = est.time_s if est is not None else None
         self._activation_clock_s = flight_clock_s(est) if est is not None else None
-        self._event = event
+        self._event = ";".join(e for e in (event, self._hover_event) if e)
+        self._hover_event = ""  # logged once
         self.phase = Phase.ENGAGING
 
     def _activate(self) -> None:
@@ -582,7 +622,8 @@ class Flight:
         if self.activation_time_s is None and est is not None:
             self.activation_time_s = est.time_s
             self._activation_clock_s = flight_clock_s(est)
-        self._event = self._event or "activated"
+        self._event = ";".join(e for e in (self._event or "activated", self._hover_event) if e)
+        self._hover_event = ""
         self.controllers.autopilot_target(self.clock())  # echoes of the take-off / hold target may still arrive
         self.phase = Phase.FOLLOWING
         self.offboard_seen = True

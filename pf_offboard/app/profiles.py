@@ -65,6 +65,11 @@ class Profile:
     attitude_rates_ff: tuple[bool, bool, bool]
     # acceleration output sent with the measured velocity as velocity target (ArduPilot: see encoders)
     accel_with_velocity: bool = False
+    # the hover-thrust parameter is only where the autopilot's own estimate starts (PX4: its
+    # hover-thrust estimator never writes MPC_THR_HOVER back): attitude / rates output measure the
+    # thrust of its attitude target while it holds instead (app/hover.py). ArduCopter learns
+    # MOT_THST_HOVER in flight and saves it (MOT_HOVER_LEARN 2): its parameter is read as it is.
+    hover_thrust_measured: bool = False
     # How the autopilot turns an acceleration setpoint into a tilt: from the horizontal demand
     # against g alone, ignoring the vertical demand (PX4 with MPC_ACC_DECOUPLE = 1, its default;
     # ArduPilot's accel_to_lean_angles always). Its collective still meets the vertical demand, so
@@ -202,6 +207,7 @@ PX4 = Profile(
     land=ModeRequest("AUTO.LAND", 4, 6),
     land_custom_mode=px4_custom_mode(4, 6),
     hover_thrust_param="MPC_THR_HOVER",
+    hover_thrust_measured=True,
     attitude_rates_ff=(False, False, True),
     accel_tilt_param="MPC_ACC_DECOUPLE",
     accel_tilt_limit_params=(("MPC_TILTMAX_AIR", 1.0),),

@@ -1,0 +1,57 @@
+"""The hover thrust the autopilot itself flies, measured from its attitude target while it holds.
+
+attitude / rates output send a normalised thrust scaled by a hover thrust (encoders.thrust_normalised).
+PX4's parameter MPC_THR_HOVER is only where its hover-thrust estimator starts: the estimate it then
+flies is never written back, so a vehicle heavier or lighter than the parameter says is sent the
+wrong thrust for every acceleration until the in-flight identification finds the gain (real PX4
+SIH at 1.5 kg, hover 0.61 against MPC_THR_HOVER 0.5: 20-23 cm RMS off a racetrack at 3 m/s before
+the identification adopted 8.8 s in, `rates` output never adopting: 7-16 cm). While the autopilot
+holds the vehicle still it streams ATTITUDE_TARGET with the thrust it hovers on: that is the value.
+Pure: fed samples, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+# Samples over this window before activation (the autopilot's clock, s; PX4 streams ATTITUDE_TARGET
+# at 2-10 Hz depending on the link's MAVLink mode)
+WINDOW_S = 1.5
+MIN_SAMPLES = 3
+# The vehicle counts as holding still below this speed (m/s), and the samples as one hover when
+# they spread at most this much (normalised thrust)
+STILL_SPEED_M_S = 0.3
+MAX_SPREAD = 0.05
+PLAUSIBLE = (0.05, 0.95)  # as the parameter (dialects.base.read_setpoint_mapping)
+
+
+class HoverThrustMeter:
+    """The autopilot's hover thrust from its attitude targets while the vehicle holds still."""
+
+    def __init__(self, window_s: float = WINDOW_S) -> None:
+        self.window_s = float(window_s)
+        self._samples: deque[tuple[float, float]] = deque()  # (autopilot s, thrust) while still
+
+    def add(self, time_s: float, thrust: float, speed_m_s: float | None) -> None:
+        """One ATTITUDE_TARGET's thrust stamped ``time_s`` (its time_boot_ms); ``speed_m_s``: the
+        vehicle's then (None: no state yet). A sample while moving, not finite or older than the
+        last (a clock jump) starts the window again."""
+        fine = speed_m_s is not None and math.isfinite(thrust) and math.isfinite(speed_m_s) and math.isfinite(time_s)
+        if not fine or speed_m_s > STILL_SPEED_M_S or (self._samples and time_s < self._samples[-1][0]):  # type: ignore[operator]
+            self._samples.clear()
+            if not fine or speed_m_s > STILL_SPEED_M_S:  # type: ignore[operator]
+                return
+        self._samples.append((float(time_s), float(thrust)))
+        while self._samples[0][0] < time_s - self.window_s:
+            self._samples.popleft()
+
+    def hover_thrust(self) -> float | None:
+        """The median thrust over the window up to the newest sample: None with fewer than
+        MIN_SAMPLES, a spread above MAX_SPREAD or a value no vehicle hovers at."""
+        values = sorted(t for _, t in self._samples)
+        if len(values) < MIN_SAMPLES or values[-1] - values[0] > MAX_SPREAD:
+            return None
+        n = len(values)
+        median = values[n // 2] if n % 2 else 0.5 * (values[n // 2 - 1] + values[n // 2])
+        return median if PLAUSIBLE[0] <= median <= PLAUSIBLE[1] else None
