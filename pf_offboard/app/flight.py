@@ -427,7 +427,6 @@ class Flight:
             est = self.pipeline.estimator.latest
             speed = float(np.linalg.norm(est.velocity_enu_m_s)) if est is not None else None
             self._hover_meter.add(msg.time_boot_ms / 1000.0, float(msg.thrust), speed)
-            return
         if kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
             self.commander.last_statustext = text.rstrip("\x00")

@@ -4,9 +4,9 @@ attitude / rates output send a normalised thrust scaled by a hover thrust (encod
 PX4's parameter MPC_THR_HOVER is only where its hover-thrust estimator starts: the estimate it then
 flies is never written back, so a vehicle heavier or lighter than the parameter says is sent the
 wrong thrust for every acceleration until the in-flight identification finds the gain (real PX4
-SIH at 1.5 kg, hover 0.61 against MPC_THR_HOVER 0.5: 20-23 cm RMS off a racetrack at 3 m/s before
-the identification adopted 8.8 s in, `rates` output never adopting: 7-16 cm). While the autopilot
-holds the vehicle still it streams ATTITUDE_TARGET with the thrust it hovers on: that is the value.
+SIH at 1.5 kg, hover 0.61 against MPC_THR_HOVER 0.5: a racetrack at 3 m/s 10.8 / 12.2 cm RMS in
+`attitude` / `rates` output, 4.0 / 6.2 with the measured value; docs/design-decisions.md). While
+the autopilot holds the vehicle still it streams ATTITUDE_TARGET with the thrust it hovers on.
 Pure: fed samples, no I/O.
 """
 
@@ -37,11 +37,12 @@ class HoverThrustMeter:
         """One ATTITUDE_TARGET's thrust stamped ``time_s`` (its time_boot_ms); ``speed_m_s``: the
         vehicle's then (None: no state yet). A sample while moving, not finite or older than the
         last (a clock jump) starts the window again."""
-        fine = speed_m_s is not None and math.isfinite(thrust) and math.isfinite(speed_m_s) and math.isfinite(time_s)
-        if not fine or speed_m_s > STILL_SPEED_M_S or (self._samples and time_s < self._samples[-1][0]):  # type: ignore[operator]
+        still = (speed_m_s is not None and math.isfinite(speed_m_s) and speed_m_s <= STILL_SPEED_M_S
+                 and math.isfinite(thrust) and math.isfinite(time_s))  # fmt: skip
+        if not still or (self._samples and time_s < self._samples[-1][0]):
             self._samples.clear()
-            if not fine or speed_m_s > STILL_SPEED_M_S:  # type: ignore[operator]
-                return
+        if not still:
+            return
         self._samples.append((float(time_s), float(thrust)))
         while self._samples[0][0] < time_s - self.window_s:
             self._samples.popleft()
