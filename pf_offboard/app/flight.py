@@ -605,13 +605,18 @@ class Flight:
         self._hover_event = f"hover_thrust_measured={hover:.3f}"
         self.display.say(f"hover thrust {hover:.3f}, measured from the autopilot's attitude target in hold ({param} {encoder.hover_thrust:g})")
 
+    def _with_hover_event(self, event: str) -> str:
+        """``event`` with the hover thrust measured for this activation, logged once (with the
+        engagement, or with the activation when nothing engaged first)."""
+        event, self._hover_event = ";".join(e for e in (event, self._hover_event) if e), ""
+        return event
+
     def _engage(self, event: str) -> None:
         """From now on the streamed setpoints are meant to fly (mode switch requested)."""
         est = self.pipeline.estimator.latest
         self.activation_time_s = est.time_s if est is not None else None
         self._activation_clock_s = flight_clock_s(est) if est is not None else None
-        self._event = ";".join(e for e in (event, self._hover_event) if e)
-        self._hover_event = ""  # logged once
+        self._event = self._with_hover_event(event)
         self.phase = Phase.ENGAGING
 
     def _activate(self) -> None:
@@ -621,8 +626,7 @@ class Flight:
         if self.activation_time_s is None and est is not None:
             self.activation_time_s = est.time_s
             self._activation_clock_s = flight_clock_s(est)
-        self._event = ";".join(e for e in (self._event or "activated", self._hover_event) if e)
-        self._hover_event = ""
+        self._event = self._with_hover_event(self._event or "activated")
         self.controllers.autopilot_target(self.clock())  # echoes of the take-off / hold target may still arrive
         self.phase = Phase.FOLLOWING
         self.offboard_seen = True

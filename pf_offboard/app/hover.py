@@ -13,6 +13,7 @@ Pure: fed samples, no I/O.
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 
 # Samples over this window before activation (the autopilot's clock, s; PX4 streams ATTITUDE_TARGET
@@ -23,7 +24,14 @@ MIN_SAMPLES = 3
 # they spread at most this much (normalised thrust)
 STILL_SPEED_M_S = 0.3
 MAX_SPREAD = 0.05
-PLAUSIBLE = (0.05, 0.95)  # as the parameter (dialects.base.read_setpoint_mapping)
+# A normalised hover thrust some vehicle hovers at: the range the config's flight.hover_thrust, the
+# autopilot's parameter (dialects.base.read_setpoint_mapping) and a measured value must lie in
+HOVER_THRUST_RANGE = (0.05, 0.95)
+
+
+def plausible_hover_thrust(value: float) -> bool:
+    """Whether ``value`` (normalised) is a hover thrust some vehicle hovers at (HOVER_THRUST_RANGE)."""
+    return HOVER_THRUST_RANGE[0] <= value <= HOVER_THRUST_RANGE[1]
 
 
 class HoverThrustMeter:
@@ -53,6 +61,5 @@ class HoverThrustMeter:
         values = sorted(t for _, t in self._samples)
         if len(values) < MIN_SAMPLES or values[-1] - values[0] > MAX_SPREAD:
             return None
-        n = len(values)
-        median = values[n // 2] if n % 2 else 0.5 * (values[n // 2 - 1] + values[n // 2])
-        return median if PLAUSIBLE[0] <= median <= PLAUSIBLE[1] else None
+        median = statistics.median(values)
+        return median if plausible_hover_thrust(median) else None

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pf_offboard.app.hover import HOVER_THRUST_RANGE, plausible_hover_thrust
 from pf_offboard.config import VELOCITY_CORRECTION_AUTO
 from pf_offboard.errors import InputError
 
@@ -57,8 +58,9 @@ def flight_settings_for(config: Any, output: str | None = None, end_action: str 
         raise InputError("flight.setpoint_rate_hz", f"must be in (2, 1000] Hz (PX4 needs > 2 Hz), got {s.setpoint_rate_hz}")
     if not (math.isfinite(s.state_timeout_s) and 0.0 < s.state_timeout_s <= 5.0):
         raise InputError("flight.state_timeout_s", f"must be in (0, 5] s, got {s.state_timeout_s}")
-    if s.hover_thrust is not None and not (0.05 <= float(s.hover_thrust) <= 0.95):
-        raise InputError("flight.hover_thrust", f"must be in [0.05, 0.95] (normalised) or omitted, got {s.hover_thrust}")
+    if s.hover_thrust is not None and not plausible_hover_thrust(float(s.hover_thrust)):
+        lo, hi = HOVER_THRUST_RANGE
+        raise InputError("flight.hover_thrust", f"must be in [{lo:g}, {hi:g}] (normalised) or omitted, got {s.hover_thrust}")
     if s.end_action not in ("hold", "land"):
         raise InputError("flight.end_action", f"must be hold or land, got {s.end_action!r}")
     if not (math.isfinite(s.attitude_time_constant_s) and 0.01 <= s.attitude_time_constant_s <= 2.0):

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from pf_offboard.app.hover import plausible_hover_thrust
 from pf_offboard.app.params import Parameters
 from pf_offboard.app.profiles import Profile, output_mode_refusal
 from pf_offboard.errors import LinkError
@@ -73,7 +74,7 @@ class Dialect:
         if output_mode != "acceleration":
             if hover_thrust is None:
                 hover = await params.read(profile.hover_thrust_param)
-                if not 0.05 <= hover <= 0.95:
+                if not plausible_hover_thrust(hover):
                     raise LinkError(f"{profile.hover_thrust_param} = {hover:g} is not a plausible hover thrust")
                 encoder = encoder.with_hover_thrust(float(hover))
             if profile.thrust_angle_boost_param is not None:
