@@ -26,6 +26,7 @@ from pf_offboard.control.types import (
     Compensation,
     Gains,
     Limits,
+    YAW_MODES,
     VehicleModel,
     YawSpec,
 )
@@ -389,7 +390,10 @@ def _gains(data: Any) -> Gains:
 
 def _yaw(data: Any, frame: str, closed: bool) -> YawSpec:
     d = _section(data, "yaw", ("mode", "yaw_deg", "table"))
-    mode = _choice(d, "mode", "yaw.mode", "constant", ("constant", "tangent", "table"))
+    # no mode: a table given is flown, else a constant heading (yaw_deg, default 0: east)
+    mode = _choice(d, "mode", "yaw.mode", "table" if "table" in d else "constant", YAW_MODES)
+    if mode == "hold" and "yaw_deg" in d:
+        raise ConfigError("yaw.yaw_deg", "not used with mode hold (the heading the vehicle has at activation); use mode constant")
     yaw_deg = _number(d, "yaw_deg", "yaw.yaw_deg", 0.0, -3600.0, 3600.0)
     assert yaw_deg is not None
     yaw = math.radians(yaw_deg)

@@ -165,7 +165,7 @@ EXTRA = {
     "path.moving_frame": "frame the transverse coordinates use: auto picks Frenet where the curvature allows",
     "controller": "path_following (the paper's law) or trajectory_tracking (a baseline)",
     "feedforward": "body-rate feed-forward: on_path (the paper) or any_state",
-    "yaw.mode": "constant heading, tangent to the path (+ yaw_deg offset), or a table over η1",
+    "yaw.mode": "constant: yaw_deg; hold: the heading the vehicle has at activation (no turn); tangent to the path (+ yaw_deg offset); or a table over η1 (the mode when only a table is given)",
     "vehicle.accel_lag_xy_s": "written by `pf-offboard identify`; absent section: a typical multicopter",
 }
 

@@ -133,6 +133,7 @@ BAD = [
     (minimal(limits={"max_approach_speed_m_s": 0.0}), "limits.max_approach_speed_m_s", ">="),
     (minimal(yaw={"mode": "spin"}), "yaw.mode", "one of"),
     (minimal(yaw={"mode": "table"}), "yaw.table", "at least 2"),
+    (minimal(yaw={"mode": "hold", "yaw_deg": 30.0}), "yaw.yaw_deg", "not used with mode hold"),
     (minimal(yaw={"mode": "table", "table": [[0.0, 0.0], [0.0, 10.0]]}), "yaw.table[1]", "increasing"),
     (minimal(yaw={"mode": "table", "table": [[0.0, 0.0], [1.0]]}), "yaw.table[1]", "2 numbers"),
     (minimal(compensation={"tangential_phase_margin_deg": 5.0}), "compensation.tangential_phase_margin_deg", ">= 10"),
@@ -284,3 +285,12 @@ def test_a_config_that_is_not_a_mapping_names_the_file(tmp_path):
         load_config(bad)
     assert err.value.field == str(bad)
     assert "must be a mapping of sections" in err.value.reason
+
+
+def test_yaw_hold_and_a_table_without_a_mode() -> None:
+    wp = [[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
+    cfg = parse_config({"path": {"waypoints": wp, "closed": True}, "yaw": {"mode": "hold"}})
+    assert cfg.yaw.mode == "hold"
+    assert parse_config({"path": {"waypoints": wp, "closed": True}}).yaw.mode == "constant"  # the default: 0, east
+    cfg = parse_config({"path": {"waypoints": wp, "closed": True}, "yaw": {"table": [[0.0, 0.0], [1.0, 90.0]]}})
+    assert cfg.yaw.mode == "table" and cfg.yaw.table_eta1_m_yaw_rad[1][1] == pytest.approx(math.pi / 2)

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from pf_offboard.app.encoders import Encoded, Encoder
+from pf_offboard.app.encoders import Encoded, Encoder, yaw_of
 from pf_offboard.app.estimator import Estimator, StateEstimate
 from pf_offboard.logs.steplog import StepRecord
 from pf_offboard.logs.summary import identified_event, rolled_back_event
@@ -138,6 +138,11 @@ class Pipeline:
         if active and not self._was_active:
             self.encoder.reset()  # the rates output starts over at activation
             self._rates_reference = False
+            # the default yaw (YawSpec.hold) keeps the heading the vehicle has now: no turn while
+            # the approach tilts it (a 90° turn at the yaw-rate bound put a light vehicle's motor at 0)
+            hold = getattr(self.follower, "hold_heading", None)
+            if hold is not None and est.q_enu_flu is not None and hold(yaw_of(est.q_enu_flu)):
+                events.append(f"heading_held={math.degrees(yaw_of(est.q_enu_flu)):.1f}")
         if active and not self._was_active and self._timed:
             # activation: what the observer learnt while the setpoints were not flown (a throw in
             # free fall, the proof-of-life stream) is not the vehicle's response: start over

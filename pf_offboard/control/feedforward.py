@@ -132,6 +132,13 @@ class YawProfile:
         if spec.mode == "table":
             self._build_table(spec.table_eta1_m_yaw_rad)
 
+    def hold(self, yaw_rad: float) -> bool:
+        """Hold ``yaw_rad`` from now on (``hold`` mode only; other modes keep their yaw): True if taken."""
+        if self.mode != "hold" or not math.isfinite(yaw_rad):
+            return False
+        self.offset = math.remainder(float(yaw_rad), _TWO_PI)
+        return True
+
     def _build_table(self, table: tuple[tuple[float, float], ...]) -> None:
         from scipy.interpolate import CubicSpline
 
@@ -188,7 +195,7 @@ class YawProfile:
 
     def evaluate(self, eta1: float, tangent: Vec, sigma_ss: Vec) -> tuple[float, float]:
         """(psi rad, d psi / d eta1 rad/m) at arclength ``eta1``; ``tangent``, ``sigma_ss`` there."""
-        if self.mode == "constant":
+        if self.mode == "constant" or self.mode == "hold":
             return self.offset, 0.0
         if self.mode == "tangent":
             hx = self.direction * tangent[0]

@@ -381,6 +381,12 @@ class PathFollower:
             self.compensator.reset()
             self._measured_projector.reset()
 
+    def hold_heading(self, yaw_rad: float) -> bool:
+        """With ``YawSpec.hold`` (the default), fly ``yaw_rad`` (ENU, rad) from now on: the app calls
+        it at activation with the vehicle's heading, so following starts without a turn. Other yaw
+        modes are left as they are. True if the heading was taken."""
+        return self._yaw.hold(yaw_rad)
+
     # ------------------------------------------------------------------ exact coordinates
     def _terms(self, y: Vec, v: Vec) -> tuple[float, tuple[float, ...], ExactTerms]:
         lam = float(self.projector.update(y))

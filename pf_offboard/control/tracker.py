@@ -145,6 +145,10 @@ class TrajectoryTracker:
         if self.compensator is not None:
             self.compensator.reset()
 
+    def hold_heading(self, yaw_rad: float) -> bool:
+        """As :meth:`PathFollower.hold_heading`: the heading ``YawSpec.hold`` flies from now on."""
+        return self._yaw.hold(yaw_rad)
+
     @property
     def start(self) -> tuple[float, float] | None:
         """(activation time s, arclength m there) of the running schedule; None before the first update."""

@@ -260,14 +260,17 @@ class Compensation:
         return cls(enabled=False)
 
 
-YAW_MODES = ("constant", "tangent", "table")
+YAW_MODES = ("constant", "hold", "tangent", "table")
 
 
 @dataclass(frozen=True)
 class YawSpec:
     """Yaw as a function of arclength eta1 (ENU yaw: from east, counter-clockwise, radians).
 
-    - ``constant``: ``yaw_rad``.
+    - ``constant`` (the default): ``yaw_rad``.
+    - ``hold``: the heading the vehicle has when following starts, held constant — no turn at
+      activation. The app sets it at activation from the attitude estimate
+      (``PathFollower.hold_heading``); until a heading is given, ``yaw_rad``.
     - ``tangent``: heading of the direction of travel (``sign(speed) * t``) plus ``yaw_rad``.
     - ``table``: ``table_eta1_m_yaw_rad`` = ((eta1_m, yaw_rad), ...), interpolated by a C2 cubic
       spline (periodic on closed paths, angles unwrapped; natural on open paths, extended
@@ -293,6 +296,10 @@ class YawSpec:
             for i in range(1, len(table)):
                 if table[i][0] <= table[i - 1][0]:
                     raise InputError(f"yaw.table[{i}]", "eta1 values must be strictly increasing")
+
+    @classmethod
+    def hold(cls) -> YawSpec:
+        return cls("hold")
 
     @classmethod
     def constant(cls, yaw_rad: float = 0.0) -> YawSpec:

@@ -292,6 +292,20 @@ def test_value_objects_and_reset(paper_path):
         Limits(max_tilt_deg=90.0)
 
 
+def test_hold_yaw_flies_the_heading_it_is_given(paper_path):
+    y = paper_path.eval(1.0).sigma + 0.1
+    f = PathFollower(paper_path, 1.5, yaw=YawSpec.hold())
+    assert f.update(y, np.zeros(3)).yaw == 0.0  # no heading given yet: yaw_rad
+    assert not f.hold_heading(math.nan)
+    assert f.hold_heading(1.2 + 2.0 * math.pi)  # wrapped
+    c = f.update(y, np.zeros(3))
+    assert c.yaw == pytest.approx(1.2, abs=1e-12) and c.yaw_rate == 0.0
+    f.reset()  # an estimator reset keeps the heading
+    assert f.update(y, np.zeros(3)).yaw == pytest.approx(1.2, abs=1e-12)
+    other = PathFollower(paper_path, 1.5, yaw=YawSpec.constant(0.3))
+    assert not other.hold_heading(1.2) and other.update(y, np.zeros(3)).yaw == pytest.approx(0.3)
+
+
 @pytest.mark.parametrize("name", ["figure8.yaml", "racetrack.yaml", "helix.yaml", "straight.yaml"])
 def test_attractive_on_the_other_shipped_paths(name):
     """20 random starts (<= 5 m, <= 4 m/s) per shipped path, both directions, rmf and open paths."""

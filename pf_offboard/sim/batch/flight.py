@@ -341,6 +341,11 @@ def _loop(tasks: Sequence[Any], setup: _Setup, sim: BatchSimulator, follower: Ba
         active = i > 0
         if active and i == 1 and timed:
             follower.reset()
+        if active and i == 1:  # the pipeline's activation: YawSpec.hold takes each flight's heading
+            from pf_offboard.app.encoders import yaw_of
+
+            q_now = q_est or _estimated_attitude(_f32(np.array((sim.qw, sim.qx, sim.qy, sim.qz))))
+            follower.hold_heading(np.array([math.nan if q is None else yaw_of(q) for q in q_now]))
         cmd = follower.update(y_enu, v_enu, t_est if timed else None)
         fallback |= alive & ~cmd.finite
         if active:

@@ -704,11 +704,22 @@ class BatchFollower:
         self.compensator = _Compensator(follower.compensator, n) if follower.compensator is not None else None
         self._measured_projector = BatchProjector(follower.path, n, self.bpath) if self.compensator is not None else None
         self._yaw = follower._yaw
+        self._held_yaw = np.full(n, float(follower._yaw.offset))  # YawSpec.hold: each flight's heading at activation
         ramp = getattr(follower, "_ramp", None)
         self._ramp = _StartRamp(ramp, n) if ramp is not None else None
         self._closed = bool(follower.path.closed)
         self._lam_max = float(follower.path.lam_max)
         self._length = float(follower.path.length_m)
+
+    def hold_heading(self, yaw_rad: Arr) -> bool:
+        """The scalar's hold_heading per flight (``hold`` yaw only; NaN rows keep their heading)."""
+        if self._yaw.mode != "hold":
+            return False
+        yaw = np.asarray(yaw_rad, dtype=float)
+        ok = np.isfinite(yaw)
+        wrapped = np.array([math.remainder(x, 2.0 * math.pi) if math.isfinite(x) else 0.0 for x in yaw.tolist()])
+        self._held_yaw = np.where(ok, wrapped, self._held_yaw)
+        return True
 
     def reset(self) -> None:
         self.projector.reset()
@@ -834,6 +845,8 @@ class BatchFollower:
         yp = self._yaw
         if yp.mode == "constant":
             return np.full_like(eta1, yp.offset), np.zeros_like(eta1)
+        if yp.mode == "hold":
+            return self._held_yaw.copy(), np.zeros_like(eta1)
         if yp.mode == "table":  # the scalar table per flight (a pure function of eta1)
             tab = np.array([yp._table(e) for e in eta1.tolist()]).reshape(-1, 2)
             return tab[:, 0], tab[:, 1]

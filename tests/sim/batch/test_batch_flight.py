@@ -135,3 +135,28 @@ def test_a_rates_flight_on_arducopter_that_adopts_a_longer_lag_follows_the_scala
     assert model is not None and model.lag_s == 0.15 and 0.06 <= model.delay_s <= 0.08
     for key in ("lag_s", "delay_s", "drag_1_s", "adopted_at_s"):
         assert abs(getattr(model, key) - float(found[key][0])) <= 1e-9, key
+
+
+@pytest.mark.parametrize(("vehicle", "output"), [("px4-sih", "acceleration"), ("arducopter", "rates")])
+def test_thrown_flights_that_hold_their_heading_follow_the_scalar_ones(tmp_path: Path, vehicle: str, output: str, scalar_flight) -> None:
+    """``yaw: {mode: hold}``: each thrown flight keeps the heading it has at activation (a random
+    one per start), in both engines."""
+    data = yaml.safe_load(PX4_SIH.read_text(encoding="utf-8"))
+    data["yaw"] = {"mode": "hold"}
+    config = tmp_path / "hold.yaml"
+    config.write_text(yaml.safe_dump(data), encoding="utf-8")
+    settings = FlightSettings(vehicle=vehicle, duration_s=10.0, settle_s=3.0, output_mode=output, rate_hz=DEFAULT_RATE_HZ)
+    tasks = plan.tasks(config, plan.SweepSpec(flights=2, seed=3, settings=settings))
+    trace: list[np.ndarray] = []
+    followers: list = []
+    rows, redo = fly(tasks, trace, followers)
+    assert not redo
+    held = followers[0]._held_yaw
+    assert abs(held[0] - held[1]) > 0.1 and np.all(np.abs(held) > 1e-3)  # each flight its own heading, not 0
+    for k, task in enumerate(tasks):
+        scalar_followers: list = []
+        scalar, row = scalar_flight(task, scalar_followers)
+        worst = float(np.max(np.abs(scalar - np.array(trace)[: len(scalar), :, k])))
+        assert worst <= 1e-6, (vehicle, k, worst)
+        assert rows_equal([rows[task.key]], [row])
+        assert scalar_followers[0]._yaw.offset == held[k]
