@@ -138,11 +138,13 @@ class Pipeline:
         if active and not self._was_active:
             self.encoder.reset()  # the rates output starts over at activation
             self._rates_reference = False
-            # the default yaw (YawSpec.hold) keeps the heading the vehicle has now: no turn while
-            # the approach tilts it (a 90° turn at the yaw-rate bound put a light vehicle's motor at 0)
+            # yaw: {mode: hold} keeps the heading the vehicle has now: no turn while the approach
+            # tilts it (a 90° turn at the yaw-rate bound put a light vehicle's motor at 0)
             hold = getattr(self.follower, "hold_heading", None)
-            if hold is not None and est.q_enu_flu is not None and hold(yaw_of(est.q_enu_flu)):
-                events.append(f"heading_held={math.degrees(yaw_of(est.q_enu_flu)):.1f}")
+            if hold is not None and est.q_enu_flu is not None:
+                heading = yaw_of(est.q_enu_flu)
+                if hold(heading):
+                    events.append(f"heading_held={math.degrees(heading):.1f}")
         if active and not self._was_active and self._timed:
             # activation: what the observer learnt while the setpoints were not flown (a throw in
             # free fall, the proof-of-life stream) is not the vehicle's response: start over

@@ -382,7 +382,7 @@ class PathFollower:
             self._measured_projector.reset()
 
     def hold_heading(self, yaw_rad: float) -> bool:
-        """With ``YawSpec.hold`` (the default), fly ``yaw_rad`` (ENU, rad) from now on: the app calls
+        """With ``YawSpec.hold``, fly ``yaw_rad`` (ENU, rad) from now on: the app calls
         it at activation with the vehicle's heading, so following starts without a turn. Other yaw
         modes are left as they are. True if the heading was taken."""
         return self._yaw.hold(yaw_rad)
