@@ -9,7 +9,7 @@ import math
 import pytest
 
 from pf_offboard.control import VehicleModel
-from pf_offboard.control.compensator import InnerLoopCompensator
+from pf_offboard.control.compensator import InnerLoopCompensator, vertical_lag
 
 
 def _fly(delay_s: float, lag_s: float, drag_1_s: float, seconds: float = 8.0, longer_lags_s: float | None = None,
@@ -47,6 +47,7 @@ def test_the_bank_finds_the_dead_time_and_the_drag(delay_s, drag_1_s):
     assert lag == 0.1 and abs(delay - delay_s) <= 0.045  # dead time and drag trade off a little
     assert abs(comp.identifier.drag_1_s - drag_1_s) <= 0.15
     assert comp.delay_s == delay and comp.horizon_s == delay  # the model moved there
+    assert comp.lag[2] == 0.05  # a shorter dead time keeps the model's vertical lag
 
 
 @pytest.mark.parametrize("drag_1_s,gain", [(0.0, 1.0), (0.8, 0.85)])
@@ -75,8 +76,9 @@ def test_a_slower_loop_is_adopted_with_its_gain_and_drag(delay_s, drag_1_s, gain
     assert abs(m.gain_xy - gain) <= 0.01 and abs(m.drag_1_s - drag_1_s) <= 0.02
     assert comp.delay_s == comp.horizon_s == delay_s and comp.hold_s == (0.0, 0.0, 0.0)
     assert abs(comp.gain[0] - gain) <= 0.01 and abs(comp.drag[0] - drag_1_s) <= 0.02
-    # the vertical axis flies the same gain and drag (a common thrust scale, isotropic drag), its own lag
-    assert abs(comp.gain[2] - gain) <= 0.01 and abs(comp.drag[2] - drag_1_s) <= 0.02 and comp.lag[2] == 0.05
+    # the vertical axis flies the same gain and drag (a common thrust scale, isotropic drag) and no
+    # lag: the longer dead time is the tilt's, the thrust answers within it (compensator.vertical_lag)
+    assert abs(comp.gain[2] - gain) <= 0.01 and abs(comp.drag[2] - drag_1_s) <= 0.02 and comp.lag[2] == 0.0
     assert (m.gain_z, m.drag_z_1_s) == (m.gain_xy, m.drag_1_s)
 
 
@@ -142,3 +144,12 @@ def test_no_longer_lags_without_identification_or_beyond_the_bound():
     capped = InnerLoopCompensator(VehicleModel.typical(), adapt=True)
     capped.identify_lags_up_to(2.0)  # at most 1.5 x the model's lag
     assert capped.identifier is not None and capped.identifier.lags == (0.1, 0.15)
+
+
+def test_the_vertical_lag_with_an_adopted_dead_time():
+    """None with a dead time longer than the model's vertical one (the tilt's: the thrust answers
+    within it), the model's otherwise; a model with its own vertical dead time counts from it."""
+    typical = VehicleModel.typical()
+    assert vertical_lag(typical, 0.13) == 0.0 and vertical_lag(typical, 0.1) == 0.05 and vertical_lag(typical, 0.04) == 0.05
+    own = VehicleModel(accel_lag_xy_s=0.1, accel_lag_z_s=0.03, accel_delay_s=0.1, accel_delay_z_s=0.15)
+    assert vertical_lag(own, 0.13) == 0.03 and vertical_lag(own, 0.16) == 0.0

@@ -209,7 +209,7 @@ class _Compensator:
                 raise NotImplementedError("the batch engine identifies with equal horizontal and vertical delays only")
             full = lambda x: np.full(n, float(x))  # noqa: E731
             self.horizon_s = full(c.horizon_s)
-            self.lag = (full(c.lag[0]), full(c.lag[1]), c.lag[2])
+            self.lag = (full(c.lag[0]), full(c.lag[1]), full(c.lag[2]))
             self.drag = (full(c.drag[0]), full(c.drag[1]), full(c.drag[2]))
             self.gain = (full(c.gain[0]), full(c.gain[1]), full(c.gain[2]))
             target = c._target if c._target is not None else (math.nan, math.nan)
@@ -543,7 +543,12 @@ class _Compensator:
         new_lag = cur_lag + np.maximum(-step, np.minimum(step, lag - cur_lag))
         new_delay = cur_delay + np.maximum(-step, np.minimum(step, delay - cur_delay))
         new_lag = np.where(rows, new_lag, cur_lag)
-        self.lag = (new_lag, new_lag, self.lag[2])
+        # compensator.vertical_lag per flight: none with a dead time longer than the model's vertical one
+        model = self.c.model
+        delay_z0 = model.accel_delay_s if model.accel_delay_z_s is None else model.accel_delay_z_s
+        lag_z, cur_lag_z = np.where(delay > delay_z0 + 1e-9, 0.0, model.accel_lag_z_s), self.lag[2]
+        new_lag_z = np.where(rows, cur_lag_z + np.maximum(-step, np.minimum(step, lag_z - cur_lag_z)), cur_lag_z)
+        self.lag = (new_lag, new_lag, new_lag_z)
         has = rows & ~np.isnan(drag)
         cur = self.drag[0]
         new_drag = np.where(has, cur + np.maximum(-drag_step, np.minimum(drag_step, drag - cur)), cur)
