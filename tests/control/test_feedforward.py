@@ -39,7 +39,7 @@ def rotation(q: np.ndarray) -> np.ndarray:
 
 CASES = [
     ("paper.yaml", None),  # constant yaw 0, Frenet frame, eta2_ref = -1.5
-    ("figure8.yaml", None),  # tangent yaw, rotation-minimising frame
+    ("figure8.yaml", YawSpec.tangent()),  # tangent yaw, rotation-minimising frame
     ("racetrack.yaml", None),  # yaw table
     ("helix.yaml", None),  # open, tangent yaw
     ("paper.yaml", YawSpec.tangent(0.4)),
