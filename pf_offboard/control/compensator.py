@@ -151,7 +151,6 @@ GUARD_SLEW_FACTOR = 5.0
 GUARD_SLEW_S = 2.0
 
 
-
 def vertical_lag(model: VehicleModel, delay_s: float) -> float:
     """The vertical lag to fly with an adopted dead time ``delay_s`` (every axis): the model's,
     or none with a dead time longer than the model's vertical one. A longer dead time is the
@@ -159,8 +158,8 @@ def vertical_lag(model: VehicleModel, delay_s: float) -> float:
     acceleration 0.05 s after the setpoint, the horizontal 0.18-0.2 s), and a vertical lag on top
     of it made the vertical loop ring: 4 Hz, 2.1-2.8 m/s^2 RMS in the vertical command on every
     real PX4 SIH flight after the joint adoption (docs/design-decisions.md)."""
-    delay_z0 = model.accel_delay_s if model.accel_delay_z_s is None else model.accel_delay_z_s
-    return 0.0 if delay_s > delay_z0 + 1e-9 else model.accel_lag_z_s
+    return 0.0 if delay_s > model.vertical_delay_s + 1e-9 else model.accel_lag_z_s
+
 
 @dataclass(frozen=True)
 class RolledBack:
@@ -202,7 +201,7 @@ class InnerLoopCompensator:
             raise InputError("max_disturbance_m_s2", f"must be >= 0, got {max_disturbance_m_s2!r}")
         self.model = model
         self.delay_s = model.accel_delay_s
-        self.delay_z_s = model.accel_delay_s if model.accel_delay_z_s is None else model.accel_delay_z_s
+        self.delay_z_s = model.vertical_delay_s
         # One prediction horizon for every axis: the law is geometric, so the state it acts on must
         # be one instant. A faster axis group (PX4's thrust answers before its tilt does) has its
         # setpoints held back by the difference, so that every axis acts at t + horizon_s.
@@ -462,11 +461,11 @@ class InnerLoopCompensator:
 
     def _move_to_target(self, dt: float, target: tuple[float, float], drag: float | None, gain: float | None = None,
                         vertical: tuple[float, float] | None = None) -> None:  # fmt: skip
-        """What an adoption does to the compensator: the lag, the dead time (every axis, held back
-        by none), the horizontal drag and gain (and a joint model's vertical gain and drag) move
-        towards the adopted candidate's at their slew rates. The one place that maps an identified
-        model to the compensator's parameters (mirrored by
-        ``pf_offboard.sim.batch.follower._Compensator._move_to_target``)."""
+        """What an adoption does to the compensator: the lag (the vertical one: :func:`vertical_lag`),
+        the dead time (every axis, held back by none), the horizontal drag and gain (and a joint
+        model's vertical gain and drag) move towards the adopted candidate's at their slew rates.
+        The one place that maps an identified model to the compensator's parameters (mirrored
+        by ``pf_offboard.sim.batch.follower._Compensator._move_to_target``)."""
         gain_step, drag_step = ADAPT_GAIN_SLEW * dt, ADAPT_DRAG_SLEW * dt
         drag_before = self.drag
         if gain is not None:

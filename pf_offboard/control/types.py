@@ -207,6 +207,11 @@ class VehicleModel:
         2.2-7.8 cm/s, 0.3 s worse again; the arducopter mock flies 0.25 s as well as before."""
         return cls(accel_lag_xy_s=0.1, accel_lag_z_s=0.05, accel_delay_s=0.1, rate_time_constant_s=0.0625)
 
+    @property
+    def vertical_delay_s(self) -> float:
+        """The vertical group's dead time (s): ``accel_delay_z_s``, else ``accel_delay_s``."""
+        return self.accel_delay_s if self.accel_delay_z_s is None else self.accel_delay_z_s
+
     def __post_init__(self) -> None:
         bounds = {
             "accel_lag_xy_s": (0.0, 2.0),

@@ -545,8 +545,7 @@ class _Compensator:
         new_lag = np.where(rows, new_lag, cur_lag)
         # compensator.vertical_lag per flight: none with a dead time longer than the model's vertical one
         model = self.c.model
-        delay_z0 = model.accel_delay_s if model.accel_delay_z_s is None else model.accel_delay_z_s
-        lag_z, cur_lag_z = np.where(delay > delay_z0 + 1e-9, 0.0, model.accel_lag_z_s), self.lag[2]
+        lag_z, cur_lag_z = np.where(delay > model.vertical_delay_s + 1e-9, 0.0, model.accel_lag_z_s), self.lag[2]
         new_lag_z = np.where(rows, cur_lag_z + np.maximum(-step, np.minimum(step, lag_z - cur_lag_z)), cur_lag_z)
         self.lag = (new_lag, new_lag, new_lag_z)
         has = rows & ~np.isnan(drag)
