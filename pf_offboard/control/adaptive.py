@@ -57,6 +57,10 @@ MIN_GAIN, MAX_GAIN = 0.5, 1.5
 LONGER_MIN_DATA_S = 6.0
 LONGER_RATIO = 0.75
 MIN_EXCITATION_M_S2 = 0.7
+# A joint fit is followed (its gain and drag flown as they move) only while the vehicle moves at
+# least this fast (RMS over the fit's memory): hovering, the setpoints' noise-driven jitter still
+# passes MIN_EXCITATION_M_S2 (the mock's px4-sih: 1.2-1.7 m/s^2 RMS) but fits no drag
+MIN_FIT_SPEED_M_S = 0.5
 SETTLE_S = 2.0
 SETTLE_GAIN_SPREAD = 0.05
 SETTLE_DRAG_SPREAD_1_S = 0.25
@@ -241,6 +245,7 @@ class ResponseIdentifier:
         self._aj = [[0.0, 0.0] for _ in self.joint]  # the joint candidates' lagged setpoints (unit gain)
         self._fit.reset()
         self.power = 0.0  # low-passed |horizontal setpoint|^2 ((m/s^2)^2)
+        self.speed_power = 0.0  # low-passed |horizontal velocity|^2 ((m/s)^2)
         self._t: float | None = None
         self.data_s = 0.0
         self.active: int | None = None
@@ -282,6 +287,17 @@ class ResponseIdentifier:
     def joint_score(self, k: int) -> float:
         """Candidate ``k``'s (a joint one) mean squared residual ((m/s^2)^2)."""
         return self._fit.score[k - self.n_bank]
+
+    @property
+    def excited(self) -> bool:
+        """Whether the setpoints' RMS over the fit's memory reaches MIN_EXCITATION_M_S2."""
+        return self.power >= MIN_EXCITATION_M_S2 * MIN_EXCITATION_M_S2
+
+    @property
+    def moving(self) -> bool:
+        """Whether the horizontal speed's RMS over the fit's memory reaches MIN_FIT_SPEED_M_S: a
+        joint fit's drag needs it, and without it (a hover) the fits drift to their prior."""
+        return self.speed_power >= MIN_FIT_SPEED_M_S * MIN_FIT_SPEED_M_S
 
     @property
     def drag_1_s(self) -> float | None:
@@ -351,6 +367,7 @@ class ResponseIdentifier:
                 k += 1
         if self.joint:
             self._joint_update(t_prev, time_s, velocity, pieces)
+        self.speed_power += min(1.0, dt / FIT_MEMORY_S) * (vx * vx + vy * vy - self.speed_power)
         self.data_s += dt
         if self.data_s < MIN_DATA_S:
             return None
@@ -422,7 +439,7 @@ class ResponseIdentifier:
         self._settle = s
         if self.data_s < LONGER_MIN_DATA_S or time_s - s[1] < SETTLE_S:
             return None
-        if self.power < MIN_EXCITATION_M_S2 * MIN_EXCITATION_M_S2:
+        if not self.excited:
             return None
         self.active, self._settle = best, None
         return self.candidate(best)

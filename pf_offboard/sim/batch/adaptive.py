@@ -41,6 +41,11 @@ class BatchIdentifier:
         return np.array([-1 if f.active is None else f.active for f in self.flights], dtype=np.int64)
 
     @property
+    def moving(self) -> NDArray[np.bool_]:
+        """:attr:`ResponseIdentifier.moving` per flight."""
+        return np.array([f.moving for f in self.flights], dtype=bool)
+
+    @property
     def drag_1_s(self) -> Arr:
         """The active candidate's drag per flight (NaN where none is adopted: the scalar's None)."""
         return np.array([math.nan if (d := f.drag_1_s) is None else d for f in self.flights])

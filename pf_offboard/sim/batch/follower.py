@@ -458,7 +458,11 @@ class _Compensator:
             follow = rows & ~np.isnan(live) & np.isnan(cz)  # a bank candidate's drag (a joint one's: as it is)
             self._drag_f = np.where(follow, f, self._drag_f)
             drag = np.where(follow, f, live)
-            self._move_to_target(dtv, rows, self._target, drag, ident.gain_xy, (gz, cz))  # type: ignore[arg-type]
+            gain = ident.gain_xy
+            still = ~np.isnan(cz) & ~ident.moving  # a joint fit while hovering: what is flown stays
+            if still.any():
+                drag, gain, gz, cz = (np.where(still, math.nan, x) for x in (drag, gain, gz, cz))
+            self._move_to_target(dtv, rows, self._target, drag, gain, (gz, cz))  # type: ignore[arg-type]
         if self._restoring.any():  # rolled back to the initial model
             r = self._r
             self._move_to_target(dtv, self._restoring, (r[0], r[1]), r[5], r[2], (r[4], r[7]))  # type: ignore[arg-type]

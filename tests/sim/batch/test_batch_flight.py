@@ -160,3 +160,25 @@ def test_thrown_flights_that_hold_their_heading_follow_the_scalar_ones(tmp_path:
         assert worst <= 1e-6, (vehicle, k, worst)
         assert rows_equal([rows[task.key]], [row])
         assert scalar_followers[0]._yaw.offset == held[k]
+
+
+def test_a_joint_fit_held_while_hovering_follows_the_scalar_flight(scalar_flight) -> None:
+    """The held-out helix's default config on the px4-sih preset, 60 s: the flight adopts the joint
+    model, reaches the open path's end and hovers there, where the compensator stops following the
+    fit (control/adaptive.py, MIN_FIT_SPEED_M_S): the engines agree through it."""
+    config = ROOT / "tests" / "real_sitl" / "configs" / "helix.yaml"
+    settings = FlightSettings(vehicle="px4-sih", duration_s=60.0, settle_s=3.0, rate_hz=DEFAULT_RATE_HZ)
+    tasks = plan.tasks(config, plan.SweepSpec(flights=1, seed=3, settings=settings))
+    assert all(supported(t) is None for t in tasks)
+    trace: list[np.ndarray] = []
+    followers: list = []
+    rows, redo = fly(tasks, trace, followers)
+    assert not redo
+    scalar_followers: list = []
+    scalar, row = scalar_flight(tasks[0], scalar_followers)
+    worst = float(np.max(np.abs(scalar - np.array(trace)[: len(scalar), :, 0])))
+    assert worst <= 1e-6, worst
+    assert rows_equal([rows[tasks[0].key]], [row])
+    ident = scalar_followers[0].compensator.identifier
+    assert scalar_followers[0].compensator.identified is not None and not ident.moving  # adopted, then hovering
+    assert not followers[0].compensator.identifier.moving[0]
