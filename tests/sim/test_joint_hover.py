@@ -15,38 +15,21 @@ import pytest
 import pf_offboard.control.adaptive as adaptive
 from pf_offboard.sim import SimSpec
 
-from .truth import fly_truth
+from .truth import above_hz, fly_sampled
 
 CONFIG = Path(__file__).resolve().parents[1] / "real_sitl" / "configs" / "helix.yaml"  # path and speed only
 
 
 def _hover(tmp_path: Path) -> tuple[np.ndarray, Any]:
     """(time s, gain, drag 1/s, vertical command m/s^2) per following step over 90 s, and the compensator."""
-    rows: list[tuple[float, float, float, float]] = []
-    flights: list = []
-
-    def patch(flight: Any) -> None:
-        flights.append(flight)
-        orig = flight.summary.add
-
-        def add(record: Any) -> None:
-            orig(record)
-            c = flight.pipeline.follower.compensator
-            if record.mode == "following":
-                rows.append((flight.autopilot.time_s, c.gain[0], c.drag[0], float(record.accel_cmd_enu_m_s2[2])))
-
-        flight.summary.add = add
-
     spec = SimSpec(autopilot="px4", vehicle="px4-sih", output_mode="rates", duration_s=90.0, rate_hz=50.0, seed=1)
-    fly_truth(CONFIG, spec, tmp_path, patch=patch)
-    return np.array(rows), flights[0].pipeline.follower.compensator
 
+    def sample(flight: Any, record: Any) -> tuple[float, ...]:
+        c = flight.pipeline.follower.compensator
+        return flight.autopilot.time_s, c.gain[0], c.drag[0], float(record.accel_cmd_enu_m_s2[2])
 
-def _ringing(t: np.ndarray, az: np.ndarray) -> float:
-    """RMS (m/s^2) of the vertical command above 2.5 Hz."""
-    spectrum = np.fft.rfft(az - az.mean())
-    freq = np.fft.rfftfreq(len(az), float(np.median(np.diff(t))))
-    return float(np.sqrt(2.0 * np.sum(np.abs(spectrum[freq > 2.5]) ** 2)) / len(az))
+    a, flight = fly_sampled(CONFIG, spec, tmp_path, sample)
+    return a, flight.pipeline.follower.compensator
 
 
 def test_a_joint_fit_is_not_followed_while_hovering(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -57,13 +40,13 @@ def test_a_joint_fit_is_not_followed_while_hovering(tmp_path: Path, monkeypatch:
     late = t > 75.0  # ... and half a minute later
     assert abs(a[late, 1].mean() - a[end, 1].mean()) < 0.01 and abs(a[late, 2].mean() - a[end, 2].mean()) < 0.01
     assert a[late, 2].mean() > 0.5  # the drag it flew stays
-    ringing = _ringing(t[late], a[late, 3])
+    ringing = above_hz(t[late], a[late, 3])
     monkeypatch.setattr(adaptive, "MIN_FIT_SPEED_M_S", 0.0)  # followed as before
     (tmp_path / "before").mkdir()
     b, _ = _hover(tmp_path / "before")
     tb = b[:, 0] - b[0, 0]
     lb = tb > 75.0
-    before = _ringing(tb[lb], b[lb, 3])
+    before = above_hz(tb[lb], b[lb, 3])
     print(f"hovering at the helix's end: gain {a[late, 1].mean():.3f}, drag {a[late, 2].mean():.3f}, vertical command "
           f"above 2.5 Hz {ringing:.2f} m/s^2 RMS (followed: gain {b[lb, 1].mean():.3f}, drag {b[lb, 2].mean():.3f}, {before:.2f})")  # fmt: skip
     assert b[lb, 2].mean() < 0.3 and before > 1.5 * ringing

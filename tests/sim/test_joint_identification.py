@@ -10,7 +10,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 
 import sitl_mock.autopilot as mock_autopilot
@@ -20,7 +19,7 @@ from sitl_mock.dynamics.params import preset
 import pf_offboard.control.compensator as compensator
 from pf_offboard.sim import SimSpec
 
-from .truth import TruthMetrics, fly_truth, truth_metrics
+from .truth import TruthMetrics, above_hz, fly_sampled, fly_truth, truth_metrics
 
 
 CONFIG = Path(__file__).resolve().parents[1] / "real_sitl" / "configs" / "figure8-tilted.yaml"  # path and speed only
@@ -77,27 +76,10 @@ def test_arducopter_never_adopts_the_joint_fit(tmp_path: Path, monkeypatch: pyte
 def _vertical_ringing(tmp_path: Path) -> tuple[float, Any]:
     """RMS (m/s^2) of the vertical acceleration command above 2.5 Hz from activation + 10 s on the
     px4-sih figure-eight (acceleration output), and the compensator."""
-    cmds: list[tuple[float, float]] = []
-    flights: list = []
-
-    def patch(flight: Any) -> None:
-        flights.append(flight)
-        orig = flight.summary.add
-
-        def add(record: Any) -> None:
-            orig(record)
-            if record.mode == "following":
-                cmds.append((flight.autopilot.time_s, float(record.accel_cmd_enu_m_s2[2])))
-
-        flight.summary.add = add
-
     spec = SimSpec(autopilot="px4", vehicle="px4-sih", output_mode="acceleration", duration_s=24.0, rate_hz=50.0, seed=1)
-    fly_truth(CONFIG, spec, tmp_path, patch=patch)
-    t, az = np.array(cmds).T
-    az = az[t >= t[0] + 10.0]
-    spectrum = np.fft.rfft(az - az.mean())
-    freq = np.fft.rfftfreq(len(az), 1.0 / 50.0)
-    return float(np.sqrt(2.0 * np.sum(np.abs(spectrum[freq > 2.5]) ** 2)) / len(az)), flights[0].pipeline.follower.compensator
+    a, flight = fly_sampled(CONFIG, spec, tmp_path, lambda f, r: (f.autopilot.time_s, float(r.accel_cmd_enu_m_s2[2])))
+    late = a[:, 0] >= a[0, 0] + 10.0
+    return above_hz(a[late, 0], a[late, 1]), flight.pipeline.follower.compensator
 
 
 def test_px4_sih_vertical_loop_does_not_ring_after_the_joint_adoption(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

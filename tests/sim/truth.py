@@ -132,3 +132,32 @@ def _estimate_cross_track_rms(f: TruthFlight, win: np.ndarray) -> float:
     pts = f.estimate_enu_m[win]
     d = [float(np.linalg.norm(p - f.path.eval(float(proj.update(p))).sigma)) for p in pts]
     return float(np.sqrt(np.mean(np.square(d))))
+
+
+def fly_sampled(config: str | FsPath, spec: SimSpec, out_dir: str | FsPath,
+                sample: Callable[[SimFlight, Any], tuple[float, ...]]) -> tuple[np.ndarray, SimFlight]:  # fmt: skip
+    """:func:`fly_truth` recording ``sample(flight, record)`` at every following step: (the
+    samples as rows, the flight)."""
+    rows: list[tuple[float, ...]] = []
+    flights: list[SimFlight] = []
+
+    def patch(flight: SimFlight) -> None:
+        flights.append(flight)
+        orig = flight.summary.add
+
+        def add(record: Any) -> None:
+            orig(record)
+            if record.mode == "following":
+                rows.append(sample(flight, record))
+
+        flight.summary.add = add  # type: ignore[method-assign]
+
+    fly_truth(config, spec, out_dir, patch=patch)
+    return np.array(rows), flights[0]
+
+
+def above_hz(time_s: np.ndarray, signal: np.ndarray, hz: float = 2.5) -> float:
+    """RMS of ``signal``'s content above ``hz`` (its spectrum over the samples' median step)."""
+    spectrum = np.fft.rfft(signal - signal.mean())
+    freq = np.fft.rfftfreq(len(signal), float(np.median(np.diff(time_s))))
+    return float(np.sqrt(2.0 * np.sum(np.abs(spectrum[freq > hz]) ** 2)) / len(signal))
