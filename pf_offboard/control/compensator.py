@@ -157,8 +157,9 @@ def vertical_lag(model: VehicleModel, delay_s: float) -> float:
     horizontal response's (the tilt's); the thrust answers sooner (real PX4 SIH: the vertical
     acceleration 0.05 s after the setpoint, the horizontal 0.18-0.2 s), and a vertical lag on top
     of it made the vertical loop ring: 4 Hz, 2.1-2.8 m/s^2 RMS in the vertical command on every
-    real PX4 SIH flight after the joint adoption (docs/design-decisions.md)."""
-    return 0.0 if delay_s > model.vertical_delay_s + 1e-9 else model.accel_lag_z_s
+    real PX4 SIH flight after the joint adoption (docs/design-decisions.md). ``delay_s`` may be
+    an array (the batch engine's, per flight)."""
+    return model.accel_lag_z_s * (delay_s <= model.vertical_delay_s + 1e-9)
 
 
 @dataclass(frozen=True)

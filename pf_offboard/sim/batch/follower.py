@@ -34,6 +34,7 @@ from pf_offboard.control.compensator import (
     MAX_GAP_S,
     OVERSPEED_MARGIN_M_S,
     OFFSET_INTEGRAL_BAND_M,
+    vertical_lag,
 )
 from pf_offboard.control.profile import REPLAN_BLEND_S
 from pf_offboard.control.types import GRAVITY_M_S2
@@ -547,9 +548,7 @@ class _Compensator:
         new_lag = cur_lag + np.maximum(-step, np.minimum(step, lag - cur_lag))
         new_delay = cur_delay + np.maximum(-step, np.minimum(step, delay - cur_delay))
         new_lag = np.where(rows, new_lag, cur_lag)
-        # compensator.vertical_lag per flight: none with a dead time longer than the model's vertical one
-        model = self.c.model
-        lag_z, cur_lag_z = np.where(delay > model.vertical_delay_s + 1e-9, 0.0, model.accel_lag_z_s), self.lag[2]
+        lag_z, cur_lag_z = vertical_lag(self.c.model, delay), self.lag[2]
         new_lag_z = np.where(rows, cur_lag_z + np.maximum(-step, np.minimum(step, lag_z - cur_lag_z)), cur_lag_z)
         self.lag = (new_lag, new_lag, new_lag_z)
         has = rows & ~np.isnan(drag)
