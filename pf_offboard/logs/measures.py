@@ -47,13 +47,14 @@ Tangent = Callable[[float], NDArray[np.float64]]
 
 def final_slowdown(speed_ref_m_s: Sequence[float], after: Sequence[bool], share: float = 0.99) -> NDArray[np.bool_]:
     """Where the reference speed has begun its final slow-down for an open path's end, among the
-    samples ``after`` marks: below ``share`` of its largest value so far and never above it again
-    (by more than 1 cm/s) until the end. A reference that dips and rises again (a speed profile
-    re-planned in flight, blended in from its adoption) is not the end's slow-down."""
+    samples ``after`` marks: below ``share`` of its largest value so far among them and never above
+    it again (by more than 1 cm/s) until the end. A reference that dips and rises again (a speed
+    profile re-planned in flight, blended in from its adoption) is not the end's slow-down, nor is
+    a cruise a little below a peak before ``after`` (the start ramp's)."""
     ref = np.abs(np.asarray(speed_ref_m_s, dtype=float))
     if ref.size == 0:
         return np.zeros(0, dtype=bool)
-    so_far = np.maximum.accumulate(ref)
+    so_far = np.maximum.accumulate(np.where(np.asarray(after, dtype=bool), ref, 0.0))
     later = np.append(np.maximum.accumulate(ref[::-1])[::-1][1:], 0.0)  # the largest after each sample
     return np.asarray(after, dtype=bool) & (ref < share * so_far) & (later <= ref + 0.01)
 
