@@ -163,11 +163,12 @@ def test_thrown_flights_that_hold_their_heading_follow_the_scalar_ones(tmp_path:
 
 
 def test_a_joint_fit_held_while_hovering_follows_the_scalar_flight(scalar_flight) -> None:
-    """The held-out helix's default config on the px4-sih preset, 60 s: the flight adopts the joint
+    """The held-out helix's default config on the px4-sih preset, 32 s: the flight adopts the joint
     model, reaches the open path's end and hovers there, where the compensator stops following the
-    fit (control/adaptive.py, MIN_FIT_SPEED_M_S): the engines agree through it."""
+    fit (control/adaptive.py, MIN_FIT_SPEED_M_S): the engines agree through it (without the batch
+    engine's hold they are 4 mm apart at 32 s, 1.3 cm at 40)."""
     config = ROOT / "tests" / "real_sitl" / "configs" / "helix.yaml"
-    settings = FlightSettings(vehicle="px4-sih", duration_s=60.0, settle_s=3.0, rate_hz=DEFAULT_RATE_HZ)
+    settings = FlightSettings(vehicle="px4-sih", duration_s=32.0, settle_s=3.0, rate_hz=DEFAULT_RATE_HZ)
     tasks = plan.tasks(config, plan.SweepSpec(flights=1, seed=3, settings=settings))
     assert all(supported(t) is None for t in tasks)
     trace: list[np.ndarray] = []
