@@ -54,9 +54,10 @@ def final_slowdown(speed_ref_m_s: Sequence[float], after: Sequence[bool], share:
     ref = np.abs(np.asarray(speed_ref_m_s, dtype=float))
     if ref.size == 0:
         return np.zeros(0, dtype=bool)
-    so_far = np.maximum.accumulate(np.where(np.asarray(after, dtype=bool), ref, 0.0))
+    inside = np.asarray(after, dtype=bool)
+    so_far = np.maximum.accumulate(np.where(inside, ref, 0.0))
     later = np.append(np.maximum.accumulate(ref[::-1])[::-1][1:], 0.0)  # the largest after each sample
-    return np.asarray(after, dtype=bool) & (ref < share * so_far) & (later <= ref + 0.01)
+    return inside & (ref < share * so_far) & (later <= ref + 0.01)
 
 
 def path_tangent(path: Any) -> Tangent:
