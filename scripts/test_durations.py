@@ -1,51 +1,60 @@
-"""Write tests/durations.json from a test run's `--durations=0` report.
+"""Write tests/durations.json from a test run's per-test times.
 
-    python -m pytest -q -n 2 --dist loadgroup --durations=0 | tee run.log
-    python scripts/test_durations.py run.log
+    PF_OFFBOARD_TEST_TIMES=times python -m pytest -q -n 0
+    python scripts/test_durations.py times
 
-Each test's seconds (setup + call + teardown) go into tests/durations.json; tests/conftest.py
-queues the work units of `--dist loadgroup` longest first from it, so that a long test does not
-start last and leave the other worker idle. Order only: a stale or missing entry changes no result.
-Tests shorter than MIN_S are left out (they count as 0, which is where they sort anyway).
+With PF_OFFBOARD_TEST_TIMES set, tests/conftest.py has each test process write the wall and CPU
+seconds (setup + call + teardown; CPU with the subprocesses the test waited for) of every test it
+ran to `times-<worker>.json` in that directory. Run it on one process (`-n 0`) on a quiet machine:
+the times are then the tests' own, not the share of a core they got. tests/conftest.py queues the
+work units of `--dist loadgroup` from the file: longest first, a computing unit and a mostly waiting
+one in turn. Order only: a stale or missing entry changes no result. Tests shorter than MIN_S are
+left out (they count as 0, which is where they sort anyway).
 """
 
 from __future__ import annotations
 
 import json
-import re
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 MIN_S = 0.5
-LINE = re.compile(r"^\s*(\d+(?:\.\d+)?)s\s+(setup|call|teardown)\s+(\S+)\s*$")
 
 
-def durations(text: str) -> dict[str, float]:
-    seconds: dict[str, float] = {}
-    for line in text.splitlines():
-        m = LINE.match(line)
-        if m:
-            nodeid = m.group(3).split("@", 1)[0]  # xdist appends @group to grouped tests
-            seconds[nodeid] = seconds.get(nodeid, 0.0) + float(m.group(1))
-    return {k: round(v, 2) for k, v in sorted(seconds.items()) if v >= MIN_S}
+def durations(times: dict[str, list[float]]) -> dict[str, list[float]]:
+    """nodeid -> [wall s, CPU s], rounded, for the tests of at least MIN_S wall."""
+    return {k: [round(v[0], 2), round(v[1], 2)] for k, v in sorted(times.items()) if v[0] >= MIN_S}
 
 
 def main(argv: list[str]) -> int:
     if len(argv) != 1:
-        print("usage: python scripts/test_durations.py RUN_LOG (a pytest --durations=0 report)", file=sys.stderr)
+        print("usage: python scripts/test_durations.py TIMES_DIR (written by a run with PF_OFFBOARD_TEST_TIMES=TIMES_DIR)",
+              file=sys.stderr)  # fmt: skip
         return 2
-    try:
-        found = durations(Path(argv[0]).read_text(errors="replace"))
-    except OSError as exc:
-        print(f"RUN_LOG: cannot read {argv[0]}: {exc.strerror}", file=sys.stderr)
+    directory = Path(argv[0])
+    times: dict[str, list[float]] = {}
+    files = sorted(directory.glob("times-*.json"))
+    for f in files:
+        try:
+            data = json.loads(f.read_text())
+        except (OSError, ValueError) as exc:
+            print(f"TIMES_DIR: cannot read {f}: {exc}", file=sys.stderr)
+            return 2
+        if not isinstance(data, dict) or not all(isinstance(v, list) and len(v) == 2 for v in data.values()):
+            print(f"TIMES_DIR: {f} is not a map of test -> [wall s, CPU s]", file=sys.stderr)
+            return 2
+        times.update(data)
+    if not times:
+        print(f"TIMES_DIR: no times-*.json with tests in {directory} (run pytest with PF_OFFBOARD_TEST_TIMES={directory})",
+              file=sys.stderr)  # fmt: skip
         return 2
-    if not found:
-        print(f"RUN_LOG: no --durations lines in {argv[0]} (run pytest with --durations=0)", file=sys.stderr)
-        return 2
+    found = durations(times)
     out = ROOT / "tests" / "durations.json"
-    out.write_text(json.dumps(found, indent=0, sort_keys=True) + "\n")
-    print(f"{out.relative_to(ROOT)}: {len(found)} tests, {sum(found.values()):.0f} s")
+    out.write_text("{\n" + ",\n".join(f"{json.dumps(k)}: {json.dumps(v)}" for k, v in found.items()) + "\n}\n")  # a test per line
+    wall = sum(v[0] for v in found.values())
+    cpu = sum(v[1] for v in found.values())
+    print(f"{out.relative_to(ROOT)}: {len(found)} tests, {wall:.0f} s wall, {cpu:.0f} s CPU")
     return 0
 
 

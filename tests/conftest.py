@@ -8,9 +8,11 @@ guard, not a speed target: speed figures live in `pf-offboard bench`.
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import signal
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -46,12 +48,20 @@ def _hang_guard() -> Iterator[None]:
         signal.signal(signal.SIGALRM, previous)
 
 
-# Each test's measured seconds (tests/durations.json, written by scripts/test_durations.py from a
-# `--durations=0` run): the work units of `--dist loadgroup` (a group, or a test of its own) are
-# queued longest first, so that the last units left are short ones and neither worker idles long
-# at the end while the other finishes a long test. Order only: every test still runs, and a test
-# missing from the file (a new one) just counts as short.
+# Each test's measured wall and CPU seconds (tests/durations.json, written by scripts/test_durations.py
+# from a run with PF_OFFBOARD_TEST_TIMES set, below): the work units of `--dist loadgroup` (a group,
+# or a test of its own) are queued longest first, so that the last units left are short ones and no
+# worker idles long at the end while another finishes a long test. Order only: every test still
+# runs, and a test missing from the file (a new one) just counts as short.
 DURATIONS = Path(__file__).with_name("durations.json")
+# A unit that computes less than this share of its wall time mostly waits (real-time flights over
+# loopback, subprocesses). Longest first alone queued those together at the start: on 2 cores the
+# four workers then waited side by side, and the tests used 0.5-1.4 of the 2 cores for the first
+# ~30 s. The queue alternates a computing unit and a waiting one, each list longest first.
+WAITING_SHARE = 0.5
+# Set to a directory: each test process writes there the wall and CPU seconds (its own and its
+# subprocesses') of every test it ran, `times-<worker>.json`, for scripts/test_durations.py.
+TIMES_ENV = "PF_OFFBOARD_TEST_TIMES"
 # The tests that open the fixed ports of the docs (UDP 14540 / 14580, TCP 5760): one group, so
 # that `--dist loadgroup` runs them one after the other on one worker (they would collide).
 FIXED_PORT_TESTS = ("tests/test_getting_started.py::test_every_command_of_the_guide_runs",
@@ -61,9 +71,38 @@ _WIDE_SCOPES = ("class", "module", "package")
 
 def pytest_configure(config: pytest.Config) -> None:
     """Keep the queue in the order below: xdist would otherwise sort loadgroup's work units by
-    their number of tests, which says little about their time."""
+    their number of tests, which says little about their time. Record each test's times when
+    TIMES_ENV asks for them."""
     if hasattr(config.option, "loadscopereorder"):
         config.option.loadscopereorder = False
+    if os.environ.get(TIMES_ENV):
+        config.pluginmanager.register(_TimeRecorder(Path(os.environ[TIMES_ENV])), "pf-offboard-test-times")
+
+
+class _TimeRecorder:
+    """Each test's wall and CPU seconds (setup, call and teardown; CPU includes the subprocesses it
+    waited for), written per process at the end of the session."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = directory
+        self.times: dict[str, list[float]] = {}
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(self, item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+        wall, cpu = time.perf_counter(), _cpu_s()
+        yield
+        self.times[item.nodeid] = [round(time.perf_counter() - wall, 3), round(_cpu_s() - cpu, 3)]
+
+    def pytest_sessionfinish(self, session: pytest.Session) -> None:
+        if self.times:  # xdist's controller runs no test
+            self.directory.mkdir(parents=True, exist_ok=True)
+            worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+            (self.directory / f"times-{worker}.json").write_text(json.dumps(self.times, indent=0, sort_keys=True) + "\n")
+
+
+def _cpu_s() -> float:
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
 
 
 # `-n auto` (the README's command): two workers per core. About a third of the suite's wall time is
@@ -83,12 +122,25 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
     return WORKERS_PER_CORE * cores
 
 
-def _expected_s() -> dict[str, float]:
+def _expected_s() -> dict[str, tuple[float, float]]:
+    """nodeid -> (wall s, CPU s) from DURATIONS (an unreadable file or entry: no expectation)."""
     try:
         data = json.loads(DURATIONS.read_text())
     except (OSError, ValueError):
         return {}
-    return {str(k): float(v) for k, v in data.items()} if isinstance(data, dict) else {}
+    if not isinstance(data, dict):
+        return {}
+    return {str(k): (float(v[0]), float(v[1])) for k, v in data.items()
+            if isinstance(v, list) and len(v) == 2 and all(isinstance(x, (int, float)) for x in v)}  # fmt: skip
+
+
+def queue_order(units: dict[str, tuple[float, float]]) -> list[str]:
+    """The units (name -> expected (wall s, CPU s)) in queue order: the computing ones and the
+    waiting ones (CPU below WAITING_SHARE of the wall) each longest first, taken in turn."""
+    names = list(units)  # ties keep this order (sorted() is stable)
+    computing = sorted((u for u in names if units[u][1] >= WAITING_SHARE * units[u][0]), key=lambda u: -units[u][0])
+    waiting = sorted((u for u in names if units[u][1] < WAITING_SHARE * units[u][0]), key=lambda u: -units[u][0])
+    return [u for pair in itertools.zip_longest(computing, waiting) for u in pair if u is not None]
 
 
 def _unit(item: pytest.Item) -> str:
@@ -102,7 +154,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """The groups of `--dist loadgroup` (a test without a group is a work unit of its own, so one
     long file does not hold one worker): the fixed-port tests form one group; a test using a class /
     module scoped fixture (the installed wheel, a fitted log) is grouped with its file, so that
-    fixture is still built once. Then the order: the units longest first (DURATIONS above)."""
+    fixture is still built once. Then the order: :func:`queue_order` (DURATIONS above)."""
     for item in items:
         if item.get_closest_marker("xdist_group") is not None:
             continue
@@ -115,10 +167,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
     expected = _expected_s()
     unit_of = {item.nodeid: _unit(item) for item in items}
-    cost: dict[str, float] = {}
+    cost: dict[str, tuple[float, float]] = {}
     for item in items:
-        cost[unit_of[item.nodeid]] = cost.get(unit_of[item.nodeid], 0.0) + expected.get(item.nodeid, 0.0)
-    items.sort(key=lambda item: -cost[unit_of[item.nodeid]])  # stable: equal units keep their order
+        wall, cpu = cost.get(unit_of[item.nodeid], (0.0, 0.0))
+        e_wall, e_cpu = expected.get(item.nodeid, (0.0, 0.0))
+        cost[unit_of[item.nodeid]] = (wall + e_wall, cpu + e_cpu)
+    rank = {unit: i for i, unit in enumerate(queue_order(cost))}
+    items.sort(key=lambda item: rank[unit_of[item.nodeid]])  # stable: a unit's tests keep their order
     # xdist (3.8) marks a grouped test for loadgroup by appending "@group" to its node id, written
     # to `item._nodeid`; pytest 9 keeps the id in `item._id`, so that changed nothing and no test was
     # grouped (a module fixture built on both workers, the fixed-port tests side by side). Write
