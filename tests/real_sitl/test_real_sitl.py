@@ -26,7 +26,9 @@ from __future__ import annotations
 import argparse
 import os
 import signal
+import socket
 import subprocess
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -100,6 +102,23 @@ def _running(command: list[str], cwd: Path, log: Path) -> Iterator[None]:
                 proc.wait()
 
 
+def _wait_until_free(port: int, timeout_s: float = 90.0) -> None:
+    """Wait until TCP ``port`` can be bound. ArduCopter SITL binds it without SO_REUSEADDR: right
+    after the previous case's SITL the port can still be held (TIME_WAIT lasts up to 60 s), the new
+    SITL then logs "bind failed on port 5760 - Address already in use" and the app finds nothing
+    listening (seen once in s44's run: the `rates` case after `attitude`)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            try:
+                probe.bind(("0.0.0.0", port))
+                return
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise AssertionError(f"TCP port {port} still in use after {timeout_s:.0f} s") from None
+        time.sleep(0.5)
+
+
 def _px4_env() -> dict[str, str]:
     return {"PX4_SIMULATOR": "sihsim", "PX4_SIM_MODEL": "sihsim_quadx", "HEADLESS": "1", "PX4_SIM_SPEED_FACTOR": "1"}
 
@@ -158,6 +177,7 @@ def test_arducopter_meets_issue_8s_targets(tmp_path: Path, output: str) -> None:
     assert binary.exists() and params.exists(), f"no {binary} or {params}"
     command = [str(binary), "--model", "+", "--speedup", "1", "--defaults", str(params), "-I0",
                "--home", "-35.363261,149.165230,584,353", "-w"]  # fmt: skip
+    _wait_until_free(5760)
     with _running(command, tmp_path, tmp_path / "arducopter.log"):
         figures = _fly(tmp_path / "log", "tcp:127.0.0.1:5760", "arducopter", 2, "--output", output, "--set-guid-options")
     _check(*figures, f"ArduCopter SITL, {output}, two laps")
