@@ -134,12 +134,17 @@ def _expected_s() -> dict[str, tuple[float, float]]:
             if isinstance(v, list) and len(v) == 2 and all(isinstance(x, (int, float)) for x in v)}  # fmt: skip
 
 
+def waits(wall_s: float, cpu_s: float) -> bool:
+    """A unit that mostly waits: CPU below WAITING_SHARE of its wall time."""
+    return cpu_s < WAITING_SHARE * wall_s
+
+
 def queue_order(units: dict[str, tuple[float, float]]) -> list[str]:
     """The units (name -> expected (wall s, CPU s)) in queue order: the computing ones and the
-    waiting ones (CPU below WAITING_SHARE of the wall) each longest first, taken in turn."""
-    names = list(units)  # ties keep this order (sorted() is stable)
-    computing = sorted((u for u in names if units[u][1] >= WAITING_SHARE * units[u][0]), key=lambda u: -units[u][0])
-    waiting = sorted((u for u in names if units[u][1] < WAITING_SHARE * units[u][0]), key=lambda u: -units[u][0])
+    waiting ones (:func:`waits`) each longest first, taken in turn."""
+    by_wall = sorted(units, key=lambda u: -units[u][0])  # stable: ties keep the collection order
+    computing = [u for u in by_wall if not waits(*units[u])]
+    waiting = [u for u in by_wall if waits(*units[u])]
     return [u for pair in itertools.zip_longest(computing, waiting) for u in pair if u is not None]
 
 
