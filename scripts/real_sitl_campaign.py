@@ -11,6 +11,11 @@ from the ULog PX4 wrote (:func:`pf_offboard.logs.truth.judge_truth`).
     python scripts/real_sitl_campaign.py --autopilots px4 --paths helix --outputs acceleration
     python scripts/real_sitl_campaign.py --app-python /work/venvs/other/bin/python --app-path /work/wt/other
 
+PX4 SIH seeds its sensor noise with a constant (``srand(1234)`` in sih.cpp): flights that start
+alike on a quiet machine fly nearly the same noise, and repeats are then not independent samples.
+``--delay-step S`` starts repeat k's app k*S s after its SITL, a stretch of the noise of its own,
+about the same one for every config and output (close, not exact: the start's timing still varies).
+
 ``--app-python`` / ``--app-path`` fly another checkout's app (its ``python -m pf_offboard``) while
 the measuring stays this one's. At most one PX4 and one ArduCopter fly at once.
 
@@ -183,6 +188,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     launch_log = (work / "launch.log").open("w")
     try:
         cmd, env = fly_command(spec, log_dir, config)
+        time.sleep(spec.get("start_delay_s") or 0.0)  # another stretch of SIH's fixed noise sequence (--delay-step)
         if spec.get("fast_start"):
             # the app needs ~2-3 s to start, connect and stream its proof of life before it
             # switches to OFFBOARD: the vehicle is sent away first and leaves at speed meanwhile
@@ -508,7 +514,7 @@ def table(directory: Path) -> list[str]:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--one", type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--out", type=Path, default=Path("runs") / time.strftime("campaign-%Y%m%dT%H%M%S"))
@@ -525,11 +531,45 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--arducopter-model", help="ArduCopter SITL's frame model (default +)")
     ap.add_argument("--px4-env", action="append", default=[], metavar="NAME=VALUE",
                     help="an environment variable for every PX4 SITL (e.g. PX4_SIH_NOISE_SCALE=0 on a SIH built to read it)")
+    ap.add_argument("--delay-step", type=float, default=0.0, metavar="S",
+                    help="repeat k starts the app k*S s after its SITL: PX4 SIH seeds its sensor noise with a "
+                         "constant (srand(1234)), so flights started alike fly nearly the same noise; delays give "
+                         "each repeat its own stretch of it (about the same for every config and output)")
     ap.add_argument("--tag", default="", help="appended to each flight's directory name")
     ap.add_argument("--starts", action="store_true", help="the thrown starts (ArduCopter) and fast off-path starts (PX4) instead")
     ap.add_argument("--table", type=Path, metavar="DIR", help="a Markdown table of a campaign's flights (ranges over repeats)")
     ap.add_argument("--report", type=Path, metavar="DIR", help="measure the flights under DIR again and print them (no flying)")
+    return ap
+
+
+def flight_specs(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """The campaign's flights, in flying order (repeat, speed, path, autopilot, output)."""
+    specs = []
+    for rep in range(args.repeat):
+        for speed in (float(s) for s in args.speeds.split(",")):
+            for name in args.paths.split(","):
+                config = Path(name) if name.endswith(".yaml") else CONFIG_DIR / f"{name}.yaml"
+                for autopilot in args.autopilots.split(","):
+                    for output in (args.outputs.split(",") if args.outputs else OUTPUTS[autopilot]):
+                        if output not in OUTPUTS[autopilot]:
+                            continue
+                        tag = f"{autopilot}-{config.stem}-{output}-v{speed:g}-{rep}{args.tag}"
+                        closed = "closed: false" not in config.read_text()
+                        specs.append({"autopilot": autopilot, "config": str(config.resolve()), "output": output,
+                                      "max_speed_m_s": None if speed == 1.5 else speed, "laps": 3 if closed else 1,
+                                      "workdir": str((args.out / tag).resolve()), "app_python": args.app_python,
+                                      "app_path": args.app_path, "start_delay_s": rep * args.delay_step,
+                                      "params": dict(kv.split("=", 1) for kv in (args.px4_param if autopilot == "px4" else args.arducopter_param)) or None,
+                                      "model": args.arducopter_model if autopilot == "arducopter" else None,
+                                      "px4_env": dict(kv.split("=", 1) for kv in args.px4_env) if autopilot == "px4" else None})  # fmt: skip
+    return specs
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = build_parser()
     args = ap.parse_args(argv)
+    if not (math.isfinite(args.delay_step) and args.delay_step >= 0.0):
+        ap.error(f"--delay-step: must be a finite number of seconds >= 0, got {args.delay_step:g}")
     if args.table:
         print("\n".join(table(args.table)))
         return 0
@@ -578,24 +618,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
     queues: dict[str, queue.Queue[dict[str, Any]]] = {}
-    specs = []
-    for rep in range(args.repeat):
-        for speed in (float(s) for s in args.speeds.split(",")):
-            for name in args.paths.split(","):
-                config = Path(name) if name.endswith(".yaml") else CONFIG_DIR / f"{name}.yaml"
-                for autopilot in args.autopilots.split(","):
-                    for output in (args.outputs.split(",") if args.outputs else OUTPUTS[autopilot]):
-                        if output not in OUTPUTS[autopilot]:
-                            continue
-                        tag = f"{autopilot}-{config.stem}-{output}-v{speed:g}-{rep}{args.tag}"
-                        closed = "closed: false" not in config.read_text()
-                        specs.append({"autopilot": autopilot, "config": str(config.resolve()), "output": output,
-                                      "max_speed_m_s": None if speed == 1.5 else speed, "laps": 3 if closed else 1,
-                                      "workdir": str((args.out / tag).resolve()), "app_python": args.app_python,
-                                      "app_path": args.app_path,
-                                      "params": dict(kv.split("=", 1) for kv in (args.px4_param if autopilot == "px4" else args.arducopter_param)) or None,
-                                      "model": args.arducopter_model if autopilot == "arducopter" else None,
-                                      "px4_env": dict(kv.split("=", 1) for kv in args.px4_env) if autopilot == "px4" else None})  # fmt: skip
+    specs = flight_specs(args)
     for spec in specs:
         queues.setdefault(spec["autopilot"], queue.Queue()).put(spec)
     lock = threading.Lock()
