@@ -549,12 +549,12 @@ def flight_specs(args: argparse.Namespace) -> list[dict[str, Any]]:
         for speed in (float(s) for s in args.speeds.split(",")):
             for name in args.paths.split(","):
                 config = Path(name) if name.endswith(".yaml") else CONFIG_DIR / f"{name}.yaml"
+                closed = "closed: false" not in config.read_text()
                 for autopilot in args.autopilots.split(","):
                     for output in (args.outputs.split(",") if args.outputs else OUTPUTS[autopilot]):
                         if output not in OUTPUTS[autopilot]:
                             continue
                         tag = f"{autopilot}-{config.stem}-{output}-v{speed:g}-{rep}{args.tag}"
-                        closed = "closed: false" not in config.read_text()
                         specs.append({"autopilot": autopilot, "config": str(config.resolve()), "output": output,
                                       "max_speed_m_s": None if speed == 1.5 else speed, "laps": 3 if closed else 1,
                                       "workdir": str((args.out / tag).resolve()), "app_python": args.app_python,

@@ -8,13 +8,16 @@ guard, not a speed target: speed figures live in `pf-offboard bench`.
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
 import json
 import os
 import signal
+import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from types import ModuleType
 
 # One BLAS thread per test process (and the subprocesses they start), set before NumPy loads:
 # xdist runs two workers per core, and OpenBLAS's own threads (one per core by default) then
@@ -46,6 +49,21 @@ def _hang_guard() -> Iterator[None]:
     finally:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, previous)
+
+
+@pytest.fixture
+def script() -> Callable[[str], ModuleType]:
+    """``script(name)``: ``scripts/<name>.py`` loaded as a module (scripts/ is not a package)."""
+
+    def load(name: str) -> ModuleType:
+        spec = importlib.util.spec_from_file_location(name, Path(__file__).resolve().parents[1] / "scripts" / f"{name}.py")
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module  # dataclasses look their module up
+        spec.loader.exec_module(module)
+        return module
+
+    return load
 
 
 # Each test's measured wall and CPU seconds (tests/durations.json, written by scripts/test_durations.py

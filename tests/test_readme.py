@@ -24,31 +24,23 @@ def test_ci_runs_the_readme_test_command():
     assert _readme_commands()[1] in ci
 
 
-def test_readme_real_autopilot_table_is_generated_from_its_data():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("gen_readme_table", ROOT / "scripts" / "gen_readme_table.py")
-    gen = importlib.util.module_from_spec(spec)
-    assert spec.loader is not None
-    spec.loader.exec_module(gen)
+def test_readme_real_autopilot_table_is_generated_from_its_data(script):
     import json
+
+    gen = script("gen_readme_table")
 
     data = json.loads((ROOT / "docs" / "data" / "real_sitl.json").read_text())
     assert gen.block((ROOT / "README.md").read_text()) == gen.render(data)
     assert gen.main(["--check"]) == 0
 
 
-def test_readme_rows_come_from_a_campaigns_results(tmp_path):
+def test_readme_rows_come_from_a_campaigns_results(tmp_path, script):
     """``--from-campaign``: one row per autopilot and output at the config's speed, one per
     autopilot with the profile (mean speeds in its label); failed flights, starts and flights without a
     speed measured in the window left out."""
-    import importlib.util
     import json
 
-    spec = importlib.util.spec_from_file_location("gen_readme_table", ROOT / "scripts" / "gen_readme_table.py")
-    gen = importlib.util.module_from_spec(spec)
-    assert spec.loader is not None
-    spec.loader.exec_module(gen)
+    gen = script("gen_readme_table")
 
     def flight(name, autopilot, output, vmax, rms, speed_err, mean, exit_code=0, **extra):
         d = tmp_path / name

@@ -22,10 +22,10 @@ real_sitl_campaign.py --starts.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
@@ -35,16 +35,7 @@ from pf_offboard.logs.steplog import read_steplog
 
 pytestmark = pytest.mark.real_sitl
 
-REPO = Path(__file__).resolve().parents[2]
 CONFIGS = Path(__file__).resolve().parent / "configs"
-
-
-def _campaign():  # the script's launch helpers (scripts/ is not a package)
-    spec = importlib.util.spec_from_file_location("real_sitl_campaign", REPO / "scripts" / "real_sitl_campaign.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _judge(result: dict, config: Path) -> tuple[float, float, float]:
@@ -64,8 +55,8 @@ def _judge(result: dict, config: Path) -> tuple[float, float, float]:
 
 
 @pytest.mark.skipif(os.environ.get("PF_OFFBOARD_ARDUCOPTER") is None, reason="set PF_OFFBOARD_ARDUCOPTER to fly ArduCopter SITL")
-def test_arducopter_thrown_start(tmp_path: Path) -> None:
-    c = _campaign()
+def test_arducopter_thrown_start(tmp_path: Path, script) -> None:
+    c = script("real_sitl_campaign")
     config = CONFIGS / "racetrack.yaml"
     result = c.run_one(c.throw_spec(c.THROWS[3], tmp_path / "throw", config))
     conv, after, speed = _judge(result, config)
@@ -74,8 +65,8 @@ def test_arducopter_thrown_start(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(os.environ.get("PF_OFFBOARD_PX4_SITL") is None, reason="set PF_OFFBOARD_PX4_SITL to fly the real PX4 SIH")
-def test_px4_fast_off_path_start(tmp_path: Path) -> None:
-    c = _campaign()
+def test_px4_fast_off_path_start(tmp_path: Path, script) -> None:
+    c = script("real_sitl_campaign")
     config = CONFIGS / "racetrack.yaml"
     # the fastest of the campaign's starts: sent away at 3 m/s, engaged at 1.98-2.27 m/s (the 2 m/s one
     # is engaged at 1.69-1.76 m/s); the bound checks the start was that one, not the follower
@@ -88,11 +79,11 @@ def test_px4_fast_off_path_start(tmp_path: Path) -> None:
 # ------------------------------------------------------------------ the default config, held-out paths
 @pytest.mark.skipif(os.environ.get("PF_OFFBOARD_ARDUCOPTER") is None, reason="set PF_OFFBOARD_ARDUCOPTER to fly ArduCopter SITL")
 @pytest.mark.parametrize("output", ["attitude", "rates"])
-def test_arducopter_default_config_on_a_held_out_path(tmp_path: Path, output: str) -> None:
+def test_arducopter_default_config_on_a_held_out_path(tmp_path: Path, output: str, script) -> None:
     """A path and a speed (1.5 m/s), nothing else, on the tilted figure-eight nobody tuned on:
     <= 2 cm cross-track RMS and <= 3 cm/s speed error RMS from the position's derivative, from
     activation + 8 s over three laps."""
-    settled = _default_flight(tmp_path, "arducopter", output)
+    settled = _default_flight(script("real_sitl_campaign"), tmp_path, "arducopter", output)
     assert settled["cross_track_rms_m"] <= 0.02 and settled["speed_error_rms_m_s"] <= 0.03
     if output == "attitude":  # ArduCopter answers attitude targets sooner than the typical model says:
         # the identification adopts a shorter dead time (0.04 s in 3 of 3 flights, 2026-11-28;
@@ -104,15 +95,15 @@ def test_arducopter_default_config_on_a_held_out_path(tmp_path: Path, output: st
 
 @pytest.mark.skipif(os.environ.get("PF_OFFBOARD_PX4_SITL") is None, reason="set PF_OFFBOARD_PX4_SITL to fly the real PX4 SIH")
 @pytest.mark.parametrize("output", ["acceleration", "attitude", "rates"])
-def test_px4_default_config_on_a_held_out_path(tmp_path: Path, output: str) -> None:
+def test_px4_default_config_on_a_held_out_path(tmp_path: Path, output: str, script) -> None:
     """As above on PX4 SIH: <= 4 cm and <= 5 cm/s (on the estimate, which the app steers; the
     printed ground-truth figures show where EKF2's own error puts the vehicle)."""
-    settled = _default_flight(tmp_path, "px4", output)
+    settled = _default_flight(script("real_sitl_campaign"), tmp_path, "px4", output)
     assert settled["cross_track_rms_m"] <= 0.04 and settled["speed_error_rms_m_s"] <= 0.05
 
 
-def _default_flight(tmp_path: Path, autopilot: str, output: str) -> dict:
-    c = _campaign()
+def _default_flight(c: ModuleType, tmp_path: Path, autopilot: str, output: str) -> dict:
+    """``c``: scripts/real_sitl_campaign.py, whose run_one flies it."""
     spec = {"autopilot": autopilot, "config": str(CONFIGS / "figure8-tilted.yaml"), "output": output, "laps": 3,
             "workdir": str(tmp_path / "flight")}  # fmt: skip
     result = c.run_one(spec)
